@@ -1,0 +1,1 @@
+"""Shared core: backend, I/O, base surfaces, height fields, tessellation."""

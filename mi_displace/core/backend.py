@@ -1,0 +1,79 @@
+"""Variant selection, the LLVM version check and plugin registration.
+
+Dr.Jit 1.5's LLVM backend aborts the whole process inside the JIT on LLVM < 17
+(``LLVM ERROR: Cannot select: ... fminimum``).  :func:`check_llvm` reads the
+version Dr.Jit loaded *before* any kernel is compiled and raises instead.
+"""
+from __future__ import annotations
+
+import os
+
+import drjit as dr
+import mitsuba as mi
+
+DEFAULT_VARIANT = "llvm_ad_rgb"
+MIN_LLVM = (17, 0, 0)
+
+LLVM_FIX = (
+    "install LLVM 19 (Debian/Ubuntu: `sudo apt-get install -y libllvm19`; Dr.Jit finds it "
+    "by itself) or point DRJIT_LIBLLVM_PATH at a libLLVM.so of version >= 17"
+)
+
+
+class LLVMVersionError(RuntimeError):
+    """Dr.Jit's LLVM backend is missing or too old to run our kernels."""
+
+
+def check_llvm() -> tuple[int, int, int]:
+    """Return Dr.Jit's libLLVM version; raise :class:`LLVMVersionError` if < 17 or absent.
+
+    Runs no kernel: Dr.Jit only loads the library to answer.
+    """
+    if not dr.has_backend(dr.JitBackend.LLVM):
+        path = os.environ.get("DRJIT_LIBLLVM_PATH", "<unset>")
+        raise LLVMVersionError(
+            f"Dr.Jit could not load libLLVM (DRJIT_LIBLLVM_PATH={path}); {LLVM_FIX}."
+        )
+    version = tuple(int(x) for x in dr.detail.llvm_version())
+    if version < MIN_LLVM:
+        raise LLVMVersionError(
+            f"Dr.Jit loaded libLLVM {'.'.join(map(str, version))}, but Dr.Jit 1.5 aborts the "
+            f"process on LLVM < 17; {LLVM_FIX}."
+        )
+    return version
+
+
+def resolve_variant(variant: str | None = None) -> str:
+    """The variant to use: the argument, else ``MI_DISPLACE_VARIANT``, else ``llvm_ad_rgb``."""
+    variant = variant or os.environ.get("MI_DISPLACE_VARIANT") or DEFAULT_VARIANT
+    if variant not in mi.variants():
+        raise ValueError(
+            f"variant {variant!r} is not one of Mitsuba's variants: {', '.join(mi.variants())}"
+        )
+    if not variant.endswith("_rgb") or variant.startswith("scalar"):
+        raise ValueError(
+            f"variant {variant!r}: mi_displace needs a vectorised RGB variant "
+            "(llvm_ad_rgb or cuda_ad_rgb)"
+        )
+    return variant
+
+
+def init(variant: str | None = None) -> str:
+    """Set the Mitsuba variant and register every mi_displace plugin for it.
+
+    Call again after any ``mi.set_variant``: plugin classes derive from the variant's
+    own ``mi.Mesh`` / ``mi.Texture`` / ... and are redefined for it.
+
+    Returns:
+        The variant name that is now active.
+    """
+    variant = resolve_variant(variant)
+    if variant.startswith("llvm"):
+        check_llvm()
+    elif variant.startswith("cuda") and not dr.has_backend(dr.JitBackend.CUDA):
+        raise RuntimeError(f"variant {variant!r} needs a CUDA GPU and driver; none was found")
+    mi.set_variant(variant)
+    from mi_displace import plugins
+
+    plugins.register_all()
+    return variant

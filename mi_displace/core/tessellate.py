@@ -1,0 +1,300 @@
+"""True displacement: P(u, v) = S(u, v) + scale * (h(u, v) - midlevel) * n(u, v), tessellated.
+
+Two kinds of base:
+
+* parametric (:mod:`mi_displace.core.surfaces`): a (nu + 1) x (nv + 1) vertex grid over
+  [0, 1]^2 with analytic shading normals
+  N = P_u x P_v,  P_u = S_u + scale ((h - m) n_u + h_u n)  (likewise for v);
+* polygonal (a triangle mesh with UVs): every triangle split into level^2 triangles on a
+  barycentric grid, vertices shared across edges; normals from the displaced faces.
+
+Everything per vertex / face is Dr.Jit; the returned buffers go straight into a mi.Mesh.
+Closed bases stay watertight: seam vertices are evaluated at the wrapped parameter and the
+sphere's pole rows collapse to one displaced point (height averaged over the pole ring).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mi_displace.core.surfaces import BaseSurface
+
+MAX_VERTICES = 2**31 // 16  # keeps 3 x 4-byte indices per vertex addressable
+
+
+def gather(cls, source, index):
+    """dr.gather of a vector type (mi.Point3f, mi.Vector2f, ...) component by component."""
+    return cls(*(dr.gather(type(c), c, index) for c in source))
+
+
+def scatter_add(target, value, index) -> None:
+    """dr.scatter_add into a vector type, component by component."""
+    for t, v in zip(target, value):
+        dr.scatter_add(t, v, index)
+
+
+@dataclass
+class Tessellation:
+    """Mesh buffers of a displaced surface (Dr.Jit arrays).
+
+    Attributes:
+        positions: mi.Point3f, V vertices [object units]
+        normals: mi.Vector3f, V unit shading normals
+        texcoords: mi.Point2f, V (u, v)
+        faces: mi.Vector3u, F triangles (counter-clockwise seen from outside)
+    """
+
+    positions: mi.Point3f
+    normals: mi.Vector3f
+    texcoords: mi.Point2f
+    faces: mi.Vector3u
+
+    @property
+    def vertex_count(self) -> int:
+        return dr.width(self.positions)
+
+    @property
+    def face_count(self) -> int:
+        return dr.width(self.faces)
+
+
+def grid_resolution(base: BaseSurface, resolution: int | None = None,
+                    edge_length: float | None = None) -> tuple[int, int]:
+    """Grid size (nu, nv) from a u-resolution or a target edge length [object units].
+
+    With ``resolution`` the v count keeps the base's aspect ratio (extent_v / extent_u).
+    """
+    ext_u, ext_v = base.extent()
+    if edge_length is not None:
+        if not edge_length > 0 or not math.isfinite(edge_length):
+            raise ValueError(f"displaced: 'edge_length' must be a positive number, got {edge_length}")
+        nu, nv = math.ceil(ext_u / edge_length), math.ceil(ext_v / edge_length)
+    else:
+        resolution = 64 if resolution is None else resolution
+        if int(resolution) != resolution or resolution < 1:
+            raise ValueError(f"displaced: 'resolution' must be a positive integer, got {resolution}")
+        nu = int(resolution)
+        nv = math.ceil(nu * ext_v / ext_u)
+    nu = max(nu, 3 if base.periodic_u else 1)
+    nv = max(nv, 2 if base.poles else (3 if base.periodic_v else 1))
+    if (nu + 1) * (nv + 1) > MAX_VERTICES:
+        raise ValueError(
+            f"displaced: a {nu} x {nv} grid ({(nu + 1) * (nv + 1):,} vertices) exceeds the "
+            f"limit of {MAX_VERTICES:,} vertices; lower 'resolution' or raise 'edge_length'"
+        )
+    return nu, nv
+
+
+def grid_faces(nu: int, nv: int, poles: bool, flip: bool) -> mi.Vector3u:
+    """Triangles of a (nu + 1) x (nv + 1) row-major vertex grid, two per quad.
+
+    With ``poles`` the triangle of each quad in the first and last row that would be
+    degenerate (two corners on the collapsed pole) is left out.  ``flip`` reverses the
+    winding so that face normals agree with the base's outward normal.
+    """
+    f = dr.arange(mi.UInt32, 2 * nu * nv)
+    if poles:
+        keep = dr.full(mi.Bool, True, dr.width(f))
+        row = (f // 2) // nu
+        odd = (f & 1) == 1
+        keep &= ~((row == 0) & ~odd) & ~((row == nv - 1) & odd)
+        f = dr.gather(mi.UInt32, f, dr.compress(keep))
+    q, odd = f // 2, (f & 1) == 1
+    a = (q // nu) * (nu + 1) + q % nu
+    b, c, d = a + 1, a + nu + 2, a + nu + 1
+    # even: (a, b, c)  odd: (a, c, d); in grid order this winds as S_u x S_v
+    i1 = dr.select(odd, c, b)
+    i2 = dr.select(odd, d, c)
+    return mi.Vector3u(a, i2, i1) if flip else mi.Vector3u(a, i1, i2)
+
+
+def displace_parametric(base: BaseSurface, height, scale: float, midlevel: float,
+                        nu: int, nv: int) -> Tessellation:
+    """Tessellate and displace a parametric base.
+
+    Args:
+        base: the base surface.
+        height: callable(uv: mi.Point2f) -> (h: mi.Float, grad: mi.Vector2f), h unitless,
+            grad per unit uv; ``None`` for zero displacement (the base itself).
+        scale: displacement per unit height [object units].
+        midlevel: height that maps to zero displacement.
+        nu, nv: grid cells along u and v.
+    """
+    i = dr.arange(mi.UInt32, (nu + 1) * (nv + 1))
+    iu, iv = i % (nu + 1), i // (nu + 1)
+    u_tex, v_tex = mi.Float(iu) / nu, mi.Float(iv) / nv
+    # Evaluate at the wrapped parameter so seam twins are bit-identical.
+    u = mi.Float(iu % nu) / nu if base.periodic_u else u_tex
+    v = mi.Float(iv % nv) / nv if base.periodic_v else v_tex
+    s = base.sample(u, v)
+    p, n = mi.Point3f(s.p), mi.Vector3f(s.n)
+    p_u, p_v = s.dp_du, s.dp_dv
+    if height is not None:
+        h, grad = height(mi.Point2f(u, v))
+        h = h - midlevel
+        if base.poles:
+            h = _pole_average(h, iv, nu, nv)
+            grad = dr.select((iv == 0) | (iv == nv), 0.0, grad)
+        p = p + scale * h * n
+        p_u = p_u + scale * (h * s.dn_du + grad.x * n)
+        p_v = p_v + scale * (h * s.dn_dv + grad.y * n)
+    if base.poles:  # collapse each pole row onto one point
+        first = dr.select(iv == 0, 0, dr.select(iv == nv, nv * (nu + 1), i))
+        p = gather(mi.Point3f, p, first)
+    normal = dr.cross(p_u, p_v)
+    orientation = dr.sign(dr.dot(dr.cross(s.dp_du, s.dp_dv), n))
+    normal *= orientation
+    degenerate = dr.squared_norm(normal) <= 1e-12 * dr.squared_norm(p_u) * dr.squared_norm(p_v)
+    normal = dr.normalize(dr.select(degenerate, n, normal))
+    flip = _winding_is_inward(base)
+    return Tessellation(positions=p, normals=normal, texcoords=mi.Point2f(u_tex, v_tex),
+                        faces=grid_faces(nu, nv, base.poles, flip))
+
+
+def _pole_average(h: mi.Float, iv: mi.UInt32, nu: int, nv: int) -> mi.Float:
+    """Replace h on the two pole rows by its mean over the row (one value per pole)."""
+    ring = dr.arange(mi.UInt32, nu)
+    north = dr.mean(dr.gather(mi.Float, h, ring))
+    south = dr.mean(dr.gather(mi.Float, h, ring + nv * (nu + 1)))
+    return dr.select(iv == 0, north, dr.select(iv == nv, south, h))
+
+
+def _winding_is_inward(base: BaseSurface) -> bool:
+    """True if S_u x S_v points against n (then faces are wound the other way)."""
+    s = base.sample(mi.Float(0.3), mi.Float(0.4))
+    return dr.dot(dr.cross(s.dp_du, s.dp_dv), s.n)[0] < 0
+
+
+# ---------------------------------------------------------------------------------------
+# Polygonal bases
+
+
+def subdivision_topology(faces: np.ndarray, weld: np.ndarray, level: int):
+    """Shared vertices of a uniform 1 -> level^2 split of every triangle (NumPy, one-off).
+
+    Grid point (i, j), i + j <= level, of face (a, b, c) has barycentrics
+    (level - i - j, i, j) / level.  Points on an edge are keyed by the edge's end
+    vertices, so neighbouring faces share them; UV-seam twins (different vertex ids, same
+    ``weld`` id) stay separate vertices (their UVs differ) but are written with the same
+    canonical (lower weld id first) interpolation, hence identical positions.
+
+    Args:
+        faces: (F, 3) int vertex indices of the base mesh.
+        weld: (V,) int position class of each base vertex.
+        level: edge splits (>= 1).
+
+    Returns:
+        src: (N, 3) uint32 base vertices and ``bary``: (N, 3) float32 weights of each new
+        vertex; ``group``: (N,) uint32 weld class of each new vertex; ``new_faces``:
+        (F * level^2, 3) uint32.
+    """
+    L, F, V = level, len(faces), int(faces.max()) + 1
+    ii, jj = np.meshgrid(np.arange(L + 1), np.arange(L + 1), indexing="ij")
+    sel = ii + jj <= L
+    w = np.stack([L - ii[sel] - jj[sel], ii[sel], jj[sel]], 1)          # (P, 3) ints
+    P = len(w)
+    src = np.repeat(faces[:, None, :], P, 1).astype(np.int64)          # (F, P, 3)
+    wts = np.broadcast_to(w, (F, P, 3)).copy()
+    nonzero = w > 0
+    kind = nonzero.sum(1)                                               # 1 corner, 2 edge, 3 interior
+    vkey = (np.arange(F)[:, None] * P + np.arange(P)[None, :]) * 3 + 2  # interior
+    gkey = vkey.copy()
+    for p in np.flatnonzero(kind == 1):
+        c = int(np.argmax(w[p]))
+        v = faces[:, c].astype(np.int64)
+        src[:, p] = v[:, None]
+        wts[:, p] = (L, 0, 0)
+        vkey[:, p], gkey[:, p] = v * 3, weld[v] * 3
+    for p in np.flatnonzero(kind == 2):
+        a, b = np.flatnonzero(nonzero[p])
+        va, vb = faces[:, a].astype(np.int64), faces[:, b].astype(np.int64)
+        swap = weld[va] > weld[vb]                                      # canonical order
+        lo, hi = np.where(swap, vb, va), np.where(swap, va, vb)
+        t = np.where(swap, w[p, b], w[p, a])                            # weight of lo
+        src[:, p] = np.stack([lo, hi, lo], 1)
+        wts[:, p] = np.stack([t, L - t, np.zeros_like(t)], 1)
+        vkey[:, p] = ((np.minimum(va, vb) * V + np.maximum(va, vb)) * (L + 1)
+                      + np.where(va < vb, w[p, a], w[p, b])) * 3 + 1
+        gkey[:, p] = ((weld[lo] * V + weld[hi]) * (L + 1) + t) * 3 + 1
+    _, first, inverse = np.unique(vkey.ravel(), return_index=True, return_inverse=True)
+    _, group = np.unique(gkey.ravel()[first], return_inverse=True)
+    # Small triangles: up (i,j),(i+1,j),(i,j+1); down (i+1,j),(i+1,j+1),(i,j+1).
+    local = -np.ones((L + 1, L + 1), dtype=np.int64)
+    local[ii[sel], jj[sel]] = np.arange(P)
+    i, j = ii[sel], jj[sel]
+    up = (i + j) < L
+    down = (i + j) < L - 1
+    tri = np.concatenate([
+        np.stack([local[i[up], j[up]], local[i[up] + 1, j[up]], local[i[up], j[up] + 1]], 1),
+        np.stack([local[i[down] + 1, j[down]], local[i[down] + 1, j[down] + 1],
+                  local[i[down], j[down] + 1]], 1)])
+    new_faces = inverse.reshape(F, P)[:, tri].reshape(-1, 3)
+    return (src.reshape(-1, 3)[first].astype(np.uint32),
+            (wts.reshape(-1, 3)[first] / L).astype(np.float32),
+            group.astype(np.uint32), new_faces.astype(np.uint32))
+
+
+def displace_mesh(positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray,
+                  faces: np.ndarray, height, scale: float, midlevel: float,
+                  level: int) -> Tessellation:
+    """Subdivide a triangle mesh with UVs and displace it along its interpolated normals.
+
+    The displacement of UV-seam twins is averaged so the surface stays closed; shading
+    normals are the area-weighted normals of the displaced faces around each position.
+
+    Args:
+        positions: (V, 3) float vertex positions [object units].
+        normals: (V, 3) float unit vertex normals.
+        uvs: (V, 2) float texture coordinates.
+        faces: (F, 3) int triangles.
+        height: callable(uv) -> (h, grad) or None; scale, midlevel: as
+            :func:`displace_parametric`.
+        level: subdivision level (each edge split into ``level`` segments).
+    """
+    _, weld = np.unique(np.asarray(positions, np.float32), axis=0, return_inverse=True)
+    src, bary, group, new_faces = subdivision_topology(faces, weld.ravel(), level)
+    idx = [mi.UInt32(src[:, k]) for k in range(3)]
+    wts = [mi.Float(bary[:, k]) for k in range(3)]
+
+    def interp(cls, data):
+        arr = cls(*[mi.Float(np.ascontiguousarray(data[:, k], np.float32))
+                    for k in range(data.shape[1])])
+        return sum((gather(cls, arr, idx[k]) * wts[k] for k in range(1, 3)),
+                   gather(cls, arr, idx[0]) * wts[0])
+
+    p = mi.Point3f(interp(mi.Vector3f, positions))
+    n = dr.normalize(interp(mi.Vector3f, normals))
+    uv = mi.Point2f(interp(mi.Vector2f, uvs))
+    groups = mi.UInt32(group)
+    n_groups = int(group.max()) + 1
+    if height is not None:
+        h, _ = height(uv)
+        d = scale * (h - midlevel) * n
+        # UV-seam twins: one displacement per position class (eq. of a welded vertex)
+        total = dr.zeros(mi.Vector3f, n_groups)
+        count = dr.zeros(mi.Float, n_groups)
+        scatter_add(total, d, groups)
+        dr.scatter_add(count, 1.0, groups)
+        p = p + gather(mi.Vector3f, total, groups) / dr.gather(mi.Float, count, groups)
+    f = mi.Vector3u(*[mi.UInt32(new_faces[:, k]) for k in range(3)])
+    return Tessellation(positions=p, normals=face_weighted_normals(p, f, groups, n_groups, n),
+                        texcoords=uv, faces=f)
+
+
+def face_weighted_normals(p: mi.Point3f, faces: mi.Vector3u, groups: mi.UInt32,
+                          n_groups: int, fallback: mi.Vector3f) -> mi.Vector3f:
+    """Area-weighted vertex normals summed over position classes ``groups``.
+
+    Vertices whose faces all have zero area keep ``fallback``.
+    """
+    p0, p1, p2 = (gather(mi.Point3f, p, faces[k]) for k in range(3))
+    fn = dr.cross(p1 - p0, p2 - p0)
+    acc = dr.zeros(mi.Vector3f, n_groups)
+    for k in range(3):
+        scatter_add(acc, fn, dr.gather(mi.UInt32, groups, faces[k]))
+    nrm = gather(mi.Vector3f, acc, groups)
+    return dr.normalize(dr.select(dr.squared_norm(nrm) > 0, nrm, fallback))

@@ -1,0 +1,1 @@
+"""Evaluation: image and mesh metrics, the comparison protocol, figures."""

@@ -1,0 +1,1 @@
+"""Rendering: the GPU-style raster integrator and scene loading/rendering helpers."""

@@ -1,0 +1,33 @@
+"""Mitsuba plugin adapters (installed as ``mi_displace.plugins``).
+
+Each module defines one plugin class against the *current* variant and a
+``register()`` function; :func:`register_all` (re)imports them after a variant change.
+"""
+import importlib
+import sys
+
+import mitsuba as mi
+
+PLUGIN_MODULES = [
+    "mi_displace.plugins.ripples",
+    "mi_displace.plugins.bricks",
+    "mi_displace.plugins.cells",
+    "mi_displace.plugins.displaced",
+    "mi_displace.plugins.raster",
+]
+
+_registered_for: str | None = None
+
+
+def register_all() -> None:
+    """Import (or re-import for a new variant) every plugin module and register it."""
+    global _registered_for
+    variant = mi.variant()
+    for name in PLUGIN_MODULES:
+        module = sys.modules.get(name)
+        if module is None:
+            module = importlib.import_module(name)
+        elif _registered_for != variant:
+            module = importlib.reload(module)
+        module.register()
+    _registered_for = variant

@@ -1,0 +1,144 @@
+"""True displacement: exact base at zero height, analytic displacement and normals,
+watertight closed bases, shared vertices of mesh subdivision."""
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+import trimesh
+
+from mi_displace.core import surfaces, tessellate
+
+
+def ripple(uv):
+    """h = 0.5 + 0.5 sin(2 pi 4 u) cos(2 pi 3 v) and its exact gradient."""
+    a, b = dr.two_pi * 4 * uv.x, dr.two_pi * 3 * uv.y
+    h = 0.5 + 0.5 * dr.sin(a) * dr.cos(b)
+    grad = mi.Vector2f(0.5 * dr.two_pi * 4 * dr.cos(a) * dr.cos(b),
+                       -0.5 * dr.two_pi * 3 * dr.sin(a) * dr.sin(b))
+    return h, grad
+
+
+def to_trimesh(t: tessellate.Tessellation) -> trimesh.Trimesh:
+    v = np.asarray(t.positions).T
+    f = np.asarray(t.faces).T
+    assert np.all(np.isfinite(v)) and np.all(np.isfinite(np.asarray(t.normals)))
+    return trimesh.Trimesh(v, f, process=True)
+
+
+PARAMS = {"plane": {}, "sphere": {"radius": 1.0}, "cylinder": {"radius": 0.5},
+          "torus": {"major_radius": 1.0, "minor_radius": 0.3}}
+
+
+@pytest.mark.parametrize("name", PARAMS)
+def test_zero_height_is_the_base_exactly(variant, name):
+    base = surfaces.make_base(name, **PARAMS[name])
+    nu, nv = tessellate.grid_resolution(base, 24)
+    flat = tessellate.displace_parametric(base, None, 0.3, 0.0, nu, nv)
+    zero = tessellate.displace_parametric(base, ripple, 0.0, 0.0, nu, nv)
+    mid = tessellate.displace_parametric(base, lambda uv: (dr.full(mi.Float, 0.5, dr.width(uv)),
+                                                           dr.zeros(mi.Vector2f, dr.width(uv))),
+                                         0.3, 0.5, nu, nv)
+    uv = np.asarray(flat.texcoords)
+    wrapped_u = np.where(uv[0] == 1, 0, uv[0]) if base.periodic_u else uv[0]
+    wrapped_v = np.where(uv[1] == 1, 0, uv[1]) if base.periodic_v else uv[1]
+    s = base.sample(mi.Float(wrapped_u), mi.Float(wrapped_v))
+    expected = np.asarray(s.p)
+    if not base.poles:
+        assert np.array_equal(np.asarray(flat.positions), expected)
+    for t in (zero, mid):  # scale 0, or height == midlevel: bit-identical to no height
+        assert np.array_equal(np.asarray(t.positions), np.asarray(flat.positions))
+        assert np.array_equal(np.asarray(t.faces), np.asarray(flat.faces))
+
+
+def test_displacement_and_analytic_normals_on_sphere(variant):
+    base = surfaces.Sphere(1.0)
+    nu, nv = 96, 48
+    t = tessellate.displace_parametric(base, ripple, 0.05, 0.5, nu, nv)
+    uv = np.asarray(t.texcoords)
+    inner = (uv[1] > 0.1) & (uv[1] < 0.9) & (uv[0] < 1)
+    u, v = mi.Float(uv[0][inner]), mi.Float(uv[1][inner])
+    s = base.sample(u, v)
+    h, _ = ripple(mi.Point2f(u, v))
+    expected = np.asarray(s.p + 0.05 * (h - 0.5) * s.n)
+    assert np.allclose(np.asarray(t.positions)[:, inner], expected, atol=1e-6)
+
+    # normals against central differences of P(u, v) (independent of the chain rule)
+    def P(a, b):
+        sb = base.sample(a, b)
+        hh, _ = ripple(mi.Point2f(a, b))
+        return np.asarray(sb.p + 0.05 * (hh - 0.5) * sb.n)
+
+    eps = 1e-3
+    pu = (P(u + eps, v) - P(u - eps, v)) / (2 * eps)
+    pv = (P(u, v + eps) - P(u, v - eps)) / (2 * eps)
+    n_fd = np.cross(pu.T, pv.T)
+    n_fd *= np.sign(np.sum(n_fd * np.asarray(s.n).T, 1))[:, None]
+    n_fd /= np.linalg.norm(n_fd, axis=1)[:, None]
+    angle = np.degrees(np.arccos(np.clip(np.sum(n_fd * np.asarray(t.normals)[:, inner].T, 1), -1, 1)))
+    assert angle.max() < 0.5
+    # the ripple really tilts the normals
+    tilt = np.degrees(np.arccos(np.clip(np.sum(np.asarray(s.n).T * np.asarray(t.normals)[:, inner].T, 1), -1, 1)))
+    assert tilt.max() > 10
+
+
+@pytest.mark.parametrize("name,euler", [("sphere", 2), ("torus", 0)])
+def test_closed_bases_stay_watertight(variant, name, euler):
+    base = surfaces.make_base(name, **PARAMS[name])
+    nu, nv = tessellate.grid_resolution(base, 40)
+    m = to_trimesh(tessellate.displace_parametric(base, ripple, 0.1, 0.0, nu, nv))
+    assert m.is_watertight and m.is_winding_consistent
+    assert m.euler_number == euler
+    assert m.volume > 0  # faces wound outwards
+
+
+def test_faces_point_along_shading_normals(variant):
+    base = surfaces.Torus(1.0, 0.3)
+    t = tessellate.displace_parametric(base, ripple, 0.02, 0.0, 64, 32)
+    m = trimesh.Trimesh(np.asarray(t.positions).T, np.asarray(t.faces).T, process=False)
+    vn = np.asarray(t.normals).T[m.faces].mean(1)
+    assert np.mean(np.sum(vn * m.face_normals, 1) > 0) > 0.999
+
+
+@pytest.mark.parametrize("level", [1, 2, 5])
+def test_subdivision_topology_shares_vertices(level):
+    ico = trimesh.creation.icosphere(1)
+    src, bary, group, faces = tessellate.subdivision_topology(
+        ico.faces, np.arange(len(ico.vertices)), level)
+    assert faces.shape == (len(ico.faces) * level**2, 3)
+    # V' = V + E (level - 1) + F (level - 1)(level - 2) / 2 for a closed mesh
+    n_edges = len(ico.edges_unique)
+    expected = len(ico.vertices) + n_edges * (level - 1) + len(ico.faces) * (level - 1) * (level - 2) // 2
+    assert len(src) == expected
+    assert np.allclose(bary.sum(1), 1)
+    pos = np.einsum("nk,nkd->nd", bary, ico.vertices[src])
+    m = trimesh.Trimesh(pos, faces, process=False)
+    assert m.is_watertight and m.euler_number == 2
+
+
+def test_mesh_displacement_welds_uv_seams(variant):
+    # A cube with every face its own UV chart: 24 vertices, seams everywhere.
+    box = trimesh.creation.box()
+    verts = box.vertices[box.faces].reshape(-1, 3)
+    faces = np.arange(len(verts)).reshape(-1, 3)
+    uvs = np.tile([[0.1, 0.1], [0.9, 0.1], [0.5, 0.9]], (len(box.faces), 1))
+    uvs = uvs + 0.01 * np.repeat(np.arange(len(box.faces)), 3)[:, None]  # charts differ
+    normals = verts / np.linalg.norm(verts, axis=1)[:, None]
+    t0 = tessellate.displace_mesh(verts, normals, uvs, faces, None, 0.1, 0.0, 1)
+    assert np.array_equal(np.asarray(t0.positions).T, verts.astype(np.float32))
+    t = tessellate.displace_mesh(verts, normals, uvs, faces, ripple, 0.1, 0.0, 4)
+    m = to_trimesh(t)
+    assert m.is_watertight and m.euler_number == 2
+    assert len(np.asarray(t.faces).T) == len(faces) * 16
+
+
+def test_grid_resolution_validation():
+    s = surfaces.Sphere(1.0)
+    for bad in (0, -3, 2.5):
+        with pytest.raises(ValueError, match="resolution"):
+            tessellate.grid_resolution(s, bad)
+    with pytest.raises(ValueError, match="edge_length"):
+        tessellate.grid_resolution(s, edge_length=0.0)
+    with pytest.raises(ValueError, match="exceeds"):
+        tessellate.grid_resolution(s, 200_000)
+    nu, nv = tessellate.grid_resolution(s, edge_length=0.1)
+    assert nu == int(np.ceil(2 * np.pi / 0.1)) and nv == int(np.ceil(np.pi / 0.1))

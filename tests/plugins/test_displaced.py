@@ -1,0 +1,87 @@
+"""The `displaced` shape plugin: XML loading, editing, stats, and bad input."""
+import mitsuba as mi
+import numpy as np
+import pytest
+import trimesh
+
+
+def displaced(**kw):
+    d = {"type": "displaced"}
+    d.update(kw)
+    return mi.load_dict(d)
+
+
+def buffers(shape):
+    p = mi.traverse(shape)
+    return (np.asarray(p["vertex_positions"]).reshape(-1, 3),
+            np.asarray(p["faces"]).reshape(-1, 3), np.asarray(p["vertex_normals"]).reshape(-1, 3))
+
+
+def test_xml_with_bitmap_height_and_edit_scale(variant, tmp_path):
+    h = np.linspace(0, 1, 32 * 16, dtype=np.float32).reshape(16, 32, 1)
+    mi.Bitmap(h).write(str(tmp_path / "h.exr"))
+    xml = f"""<scene version="3.0.0"><shape type="displaced" id="d">
+        <string name="base" value="torus"/><float name="major_radius" value="1"/>
+        <float name="minor_radius" value="0.25"/><integer name="resolution" value="48"/>
+        <float name="scale" value="0.1"/>
+        <texture type="bitmap" name="height"><string name="filename" value="{tmp_path / 'h.exr'}"/>
+            <boolean name="raw" value="true"/></texture></shape></scene>"""
+    scene = mi.load_string(xml)
+    shape = scene.shapes()[0]
+    stats = shape.build_stats
+    assert stats["faces"] == shape.face_count() and stats["vertices"] == shape.vertex_count()
+    pos, faces, nrm = buffers(shape)
+    assert np.all(np.isfinite(pos)) and np.all(np.isfinite(nrm))
+    m = trimesh.Trimesh(pos, faces)
+    assert m.is_watertight
+    params = mi.traverse(scene)
+    params["d.scale"] = 0.0
+    params.update()
+    pos0, faces0, _ = buffers(shape)
+    assert np.array_equal(faces0, faces)
+    # scale 0 gives the plain torus: distance to the tube circle == minor radius
+    ring = np.linalg.norm(pos0[:, :2], axis=1)
+    assert np.allclose(np.hypot(ring - 1.0, pos0[:, 2]), 0.25, atol=1e-6)
+    assert scene.bbox().max.z < 0.25 + 1e-5
+
+
+def test_mesh_base(variant, tmp_path):
+    ico = trimesh.creation.icosphere(2)
+    uv = np.stack([np.arctan2(ico.vertices[:, 1], ico.vertices[:, 0]) / (2 * np.pi) + 0.5,
+                   np.arccos(np.clip(ico.vertices[:, 2], -1, 1)) / np.pi], 1)
+    ico.visual = trimesh.visual.TextureVisuals(uv=uv)
+    ico.export(tmp_path / "ico.ply")
+    s = displaced(base="mesh", filename=str(tmp_path / "ico.ply"), subdivision=3, scale=0.05,
+                  height={"type": "checkerboard"})
+    pos, faces, nrm = buffers(s)
+    assert len(faces) == len(ico.faces) * 9
+    assert np.all(np.isfinite(pos)) and np.allclose(np.linalg.norm(nrm, axis=1), 1, atol=1e-5)
+    r = np.linalg.norm(pos, axis=1)
+    assert r.max() > 1.0 + 0.01  # checkerboard (0.4 / 0.2) pushes vertices out
+
+
+@pytest.mark.parametrize("props,match", [
+    ({"base": "cube"}, "unknown base 'cube'"),
+    ({"base": "sphere", "resolution": 0}, "resolution"),
+    ({"base": "sphere", "resolution": -4}, "resolution"),
+    ({"base": "sphere", "radius": -1.0}, "radius"),
+    ({"base": "mesh", "filename": "/no/such/file.ply"}, "not found: /no/such/file.ply"),
+    ({"base": "sphere", "scale": float("nan")}, "scale"),
+])
+def test_bad_input_is_named(variant, props, match):
+    with pytest.raises(Exception, match=match):
+        displaced(**props)
+
+
+def test_mesh_without_uvs_is_refused(variant, tmp_path):
+    trimesh.creation.icosphere(1).export(tmp_path / "plain.ply")
+    with pytest.raises(Exception, match="has no UVs"):
+        displaced(base="mesh", filename=str(tmp_path / "plain.ply"))
+
+
+def test_nan_in_height_bitmap_is_refused(variant, tmp_path):
+    h = np.ones((8, 8, 1), np.float32)
+    h[3, 4] = np.nan
+    mi.Bitmap(h).write(str(tmp_path / "nan.exr"))
+    with pytest.raises(Exception, match="NaN/Inf texel"):
+        displaced(height={"type": "bitmap", "filename": str(tmp_path / "nan.exr"), "raw": True})
