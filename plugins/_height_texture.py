@@ -1,0 +1,115 @@
+"""Shared base of the procedural height textures (``ripples``, ``bricks``, ``cells``).
+
+Nanobind allows a single bound base class and no mixins, and ``mi.Texture`` differs per
+variant, so :func:`height_texture_base` builds the base class for the *current* variant
+(cached per variant); each plugin module subclasses it at import time and is re-imported by
+:func:`mi_displace.plugins.register_all` after a variant change.
+
+A subclass sets ``PATTERN`` (a key of :data:`mi_displace.core.heightfield.PATTERNS`); its
+properties are then the pattern's parameters with the pattern's defaults. It may override
+:meth:`read_properties` and :meth:`pattern_params` to map other properties onto them.
+Every property is a plain number, exposed by ``traverse`` as a non-differentiable
+``mi.Float`` and re-validated in ``parameters_changed``. ``to_uv`` (optional, as in
+``bitmap``) is exposed as a ``mi.ScalarTransform3f``.
+"""
+from __future__ import annotations
+
+import mitsuba as mi
+import numpy as np
+
+from mi_displace.core import heightfield as hf
+
+_BASES: dict[str, type] = {}
+
+
+def height_texture_base() -> type:
+    """The ``mi.Texture`` subclass shared by the height textures, for the current variant."""
+    variant = mi.variant()
+    if variant is None:
+        raise RuntimeError("set a Mitsuba variant before importing mi_displace.plugins modules")
+    if variant not in _BASES:
+        _BASES[variant] = _make_base()
+    return _BASES[variant]
+
+
+def _transform3(value, plugin: str) -> mi.ScalarTransform3f:
+    """A ``to_uv`` property (4x4 from XML/dict, or 3x3) as the 2D ``mi.ScalarTransform3f``."""
+    affine = hf.uv_affine(value, plugin)
+    if affine is None:
+        return mi.ScalarTransform3f()
+    (a00, a01, a10, a11), (t0, t1) = affine
+    return mi.ScalarTransform3f(np.array([[a00, a01, t0], [a10, a11, t1], [0.0, 0.0, 1.0]]))
+
+
+def _make_base() -> type:
+    class HeightTexture(mi.Texture):
+        """Procedural height in ``[0, 1]`` (gray), with the exact ``uv`` gradient."""
+
+        PATTERN = ""
+
+        def __init__(self, props: mi.Properties):
+            super().__init__(props)
+            # Python floats (exact, for the kernels) and their mi.Float mirrors (for traverse)
+            self._flat = {name: hf.check_real(self.PATTERN, name, value)
+                          for name, value in self.read_properties(props).items()}
+            self._values = {name: mi.Float(value) for name, value in self._flat.items()}
+            self._to_uv = _transform3(props.get("to_uv", mi.ScalarTransform4f()), self.PATTERN)
+            self.parameters_changed([])
+
+        # -- parameters ------------------------------------------------------------------
+        def read_properties(self, props: mi.Properties) -> dict:
+            """The flat parameter values from ``props`` (the pattern's defaults where absent)."""
+            return {name: props.get(name, default)
+                    for name, default in hf.pattern_defaults(self.PATTERN).items()}
+
+        def pattern_params(self, flat: dict[str, float]) -> dict:
+            """Keyword arguments of the core pattern from the flat property values."""
+            return flat
+
+        def parameters_changed(self, keys=None):
+            flat = dict(self._flat)
+            flat.update({k: float(self._values[k][0]) for k in keys or () if k in self._values})
+            _, check, mean = hf.PATTERNS[self.PATTERN]
+            self._params = check(**self.pattern_params(flat))   # ValueError names the key
+            self._flat = flat
+            self._affine = hf.uv_affine(self._to_uv, self.PATTERN)
+            self._mean = mean(**self._params)
+
+        def traverse(self, cb):
+            for name, value in self._values.items():
+                cb.put(name, value, mi.ParamFlags.NonDifferentiable)
+            cb.put("to_uv", self._to_uv, mi.ParamFlags.NonDifferentiable)
+
+        # -- evaluation ------------------------------------------------------------------
+        def height(self, si: mi.SurfaceInteraction3f) -> tuple[mi.Float, mi.Vector2f]:
+            """``(h, dh/d(si.uv))``: the pattern at ``to_uv(si.uv)`` with the chain rule."""
+            return hf.evaluate(self.PATTERN, si.uv, self._affine, **self._params)
+
+        def eval_1(self, si, active=True):
+            return self.height(si)[0]
+
+        def eval_1_grad(self, si, active=True):
+            return self.height(si)[1]
+
+        def eval(self, si, active=True):
+            return mi.UnpolarizedSpectrum(self.height(si)[0])
+
+        def eval_3(self, si, active=True):
+            return mi.Color3f(self.height(si)[0])
+
+        def mean(self):
+            """Mean over the unit square of the untransformed pattern (as ``bitmap``)."""
+            return mi.Float(self._mean)
+
+        def max(self):
+            """Upper bound of the height (heights lie in ``[0, 1]``)."""
+            return mi.Float(1.0)
+
+        def is_spatially_varying(self):
+            return True
+
+        def to_string(self):
+            params = ", ".join(f"{k}={v}" for k, v in self._params.items())
+            return f"{type(self).__name__}[{params}, to_uv={self._affine}, mean={self._mean:.6g}]"
+
+    return HeightTexture

@@ -1,0 +1,29 @@
+"""``ripples`` texture: egg-crate sine height ``1/2 + 1/2 sin(2 pi f_u u + phase) sin(2 pi f_v v)``.
+
+Properties: ``frequency`` (periods per unit uv, default 8), ``frequency_u`` /
+``frequency_v`` (per-axis overrides), ``phase`` (radians, default 0), ``to_uv`` (optional
+transform). See :func:`mi_displace.core.heightfield.ripples`.
+"""
+import mitsuba as mi
+
+from mi_displace.core.heightfield import pattern_defaults
+from mi_displace.plugins._height_texture import height_texture_base
+
+
+class Ripples(height_texture_base()):
+    PATTERN = "ripples"
+
+    def read_properties(self, props):
+        defaults = pattern_defaults("ripples")
+        frequency = props.get("frequency", defaults["frequency"])
+        return {"frequency_u": props.get("frequency_u", frequency),
+                "frequency_v": props.get("frequency_v", frequency),
+                "phase": props.get("phase", defaults["phase"])}
+
+    def pattern_params(self, flat):
+        fu, fv = flat["frequency_u"], flat["frequency_v"]
+        return {"frequency": fu if fu == fv else (fu, fv), "phase": flat["phase"]}
+
+
+def register():
+    mi.register_texture("ripples", lambda props: Ripples(props))
