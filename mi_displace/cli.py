@@ -1,0 +1,251 @@
+"""Command line interface: ``mi-displace [--variant V] {render,compare,showcase,bench} ...``.
+
+* ``render SCENE.xml [-D name=value ...] [--spp N] [--seed S] --out IMG.(exr|png)``
+* ``compare SCENE.xml --out DIR [-D name=value ...] [--max-spp N] [--target-ratio R]``
+  runs the comparison protocol (:mod:`mi_displace.evaluate.compare`).
+* ``showcase --out DIR [--quick] [--scenes DIR] [--max-spp N]`` compares every scene marked
+  ``<!-- showcase -->`` under the repository's ``scenes/`` folder (or ``--scenes``), writes
+  ``DIR/<scene>/...`` and ``DIR/summary.md`` and prints the summary table.  ``--quick``
+  caps the reference at :data:`QUICK_MAX_SPP` samples per pixel.
+* ``bench NAME [--json]`` runs ``mi_displace.bench.NAME.main(json=True/False)`` (JSON or
+  plain-text report on stdout).
+
+Bad input (missing file, bad parameter, unknown name) prints one line to stderr and exits
+with status 2, like argparse's own usage errors; a missing or too old LLVM exits with 1.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import re
+import sys
+import traceback
+from pathlib import Path
+
+QUICK_MAX_SPP = 64
+DEFAULT_MAX_SPP = 1024
+SHOWCASE_MARK = re.compile(r"<!--\s*showcase\s*-->")
+SUMMARY_COLUMNS = (
+    ("scene", "scene"), ("FLIP", "flip_mean"), ("noise floor", "noise_floor_flip"),
+    ("relMSE", "relmse"), ("PSNR (dB)", "psnr"), ("reference spp", "reference_spp"),
+    ("reference time (s)", "reference_time_s"), ("approx. warm time (s)", "approx_time_warm_s"),
+    ("speed-up", "speedup"),
+)
+
+
+class UsageError(ValueError):
+    """Bad command-line input found by the CLI itself."""
+
+
+def default_scenes_dir() -> Path:
+    """The repository's ``scenes/`` folder, next to the ``mi_displace`` package."""
+    return Path(__file__).resolve().parents[1] / "scenes"
+
+
+def _define(text: str) -> tuple[str, str]:
+    """argparse type of ``-D name=value``."""
+    name, sep, value = text.partition("=")
+    if not sep or not re.fullmatch(r"[A-Za-z_]\w*", name):
+        raise argparse.ArgumentTypeError(f"expected name=value, got {text!r}")
+    return name, value
+
+
+def _positive_int(text: str) -> int:
+    """argparse type of a positive integer."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return value
+
+
+def _seed(text: str) -> int:
+    """argparse type of a sampler seed in [0, 2^32)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value < 2**32:
+        raise argparse.ArgumentTypeError(f"expected an integer in [0, 2^32), got {text!r}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``mi-displace``."""
+    parser = argparse.ArgumentParser(
+        prog="mi-displace", description="Displacement mapping for Mitsuba 3: render, compare, benchmark.")
+    parser.add_argument("--variant", help="Mitsuba variant (default: $MI_DISPLACE_VARIANT or llvm_ad_rgb)")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    def defines(p):
+        p.add_argument("-D", dest="defines", metavar="NAME=VALUE", action="append", type=_define,
+                       default=[], help="scene parameter ($NAME in the XML); repeatable")
+
+    p = sub.add_parser("render", help="render a scene to an image")
+    p.add_argument("scene", type=Path, help="scene XML file")
+    defines(p)
+    p.add_argument("--spp", type=_positive_int, help="samples per pixel (default: the scene's)")
+    p.add_argument("--seed", type=_seed, default=0, help="sampler seed (default 0)")
+    p.add_argument("--bits", type=int, choices=(8, 16), default=8, help="bits per channel of a PNG")
+    p.add_argument("--out", type=Path, required=True, help="output image, .exr (linear) or .png (sRGB)")
+
+    p = sub.add_parser("compare", help="compare a scene's approximation with its reference")
+    p.add_argument("scene", type=Path, help="scene XML file following the comparison convention")
+    defines(p)
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--max-spp", type=_positive_int, default=DEFAULT_MAX_SPP,
+                   help=f"most samples per pixel of the reference (default {DEFAULT_MAX_SPP})")
+    p.add_argument("--target-ratio", type=float, default=0.2,
+                   help="required noise floor / FLIP ratio (default 0.2)")
+
+    p = sub.add_parser("showcase", help="compare every scene marked <!-- showcase -->")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--quick", action="store_true", help=f"cap references at {QUICK_MAX_SPP} spp")
+    p.add_argument("--scenes", type=Path, default=None,
+                   help=f"scene folder (default {default_scenes_dir()})")
+    p.add_argument("--max-spp", type=_positive_int, default=None,
+                   help=f"most reference spp (default {DEFAULT_MAX_SPP}, {QUICK_MAX_SPP} with --quick)")
+
+    p = sub.add_parser("bench", help="run a benchmark module mi_displace.bench.NAME")
+    p.add_argument("name", help="benchmark name")
+    p.add_argument("--json", action="store_true", help="print the results as JSON")
+    return parser
+
+
+def _fmt(value, digits: int = 4) -> str:
+    """A number for a table cell."""
+    if value is None:
+        return "–"
+    if isinstance(value, float):
+        return f"{value:.{digits}g}"
+    return str(value)
+
+
+def summary_table(rows: list[dict]) -> str:
+    """Markdown table of comparison results (one row per scene, ``error`` rows allowed)."""
+    lines = ["| " + " | ".join(title for title, _ in SUMMARY_COLUMNS) + " |",
+             "|" + "|".join("---" for _ in SUMMARY_COLUMNS) + "|"]
+    for row in rows:
+        if "error" in row:
+            cells = [row["scene"], f"failed: {row['error']}"] + [""] * (len(SUMMARY_COLUMNS) - 2)
+        else:
+            cells = [row["scene"]] + [_fmt(row[key]) for _, key in SUMMARY_COLUMNS[1:]]
+            if row.get("spp_capped"):
+                cells[5] += " (capped)"
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _cmd_render(args) -> int:
+    from mi_displace.core.io import image_format, write_image
+    from mi_displace.evaluate.metrics import assert_finite
+    from mi_displace.render.scene import load, render
+
+    image_format(args.out, "--out")
+    scene, timings = load(args.scene, **dict(args.defines))
+    image, seconds = render(scene, spp=args.spp, seed=args.seed, progress=True)
+    assert_finite(image, f"rendered image of {args.scene}")
+    write_image(args.out, image, bits=args.bits)
+    spp = args.spp or timings["spp"]
+    print(f"wrote {args.out} ({image.shape[1]}x{image.shape[0]}, {spp} spp): "
+          f"build {timings['build_s']:.3f} s, render {seconds:.3f} s")
+    return 0
+
+
+def _cmd_compare(args) -> int:
+    from mi_displace.evaluate.compare import compare
+
+    r = compare(args.scene, args.out, params=dict(args.defines), max_spp=args.max_spp,
+                target_ratio=args.target_ratio, progress=True)
+    capped = ", capped" if r["spp_capped"] else ""
+    print(f"{args.scene}: FLIP {r['flip_mean']:.4f} (noise floor {r['noise_floor_flip']:.4f}), "
+          f"relMSE {r['relmse']:.4g}, PSNR {_fmt(r['psnr'])} dB, SSIM {r['ssim']:.4f}\n"
+          f"reference {r['reference_spp']} spp{capped}: {r['reference_time_s']:.3f} s; "
+          f"approximation {r['approx_time_warm_s']:.3f} s warm, {r['approx_time_cold_s']:.3f} s cold; "
+          f"speed-up {r['speedup']:.3g}x\nwrote {args.out}/panel.png, metrics.json")
+    return 0
+
+
+def showcase_scenes(scenes_dir: Path) -> list[Path]:
+    """Scene XML files under ``scenes_dir`` that contain ``<!-- showcase -->``, sorted."""
+    if not scenes_dir.is_dir():
+        raise FileNotFoundError(f"scene folder {str(scenes_dir)!r} does not exist")
+    found = sorted(p for p in scenes_dir.rglob("*.xml") if SHOWCASE_MARK.search(p.read_text()))
+    if not found:
+        raise UsageError(f"no scene under {str(scenes_dir)!r} is marked <!-- showcase -->")
+    return found
+
+
+def _cmd_showcase(args) -> int:
+    from mi_displace.evaluate.compare import compare
+
+    scenes_dir = args.scenes or default_scenes_dir()
+    max_spp = args.max_spp or (QUICK_MAX_SPP if args.quick else DEFAULT_MAX_SPP)
+    rows, failed = [], 0
+    for path in showcase_scenes(scenes_dir):
+        name = path.relative_to(scenes_dir).with_suffix("").as_posix()
+        print(f"[showcase] {name} ...", file=sys.stderr, flush=True)
+        try:
+            rows.append({**compare(path, args.out / name, max_spp=max_spp, progress=True), "scene": name})
+        except Exception as e:  # one broken scene must not hide the others' results
+            failed += 1
+            if not isinstance(e, (ValueError, FileNotFoundError)):
+                traceback.print_exc()
+            rows.append({"scene": name, "error": " ".join(str(e).split())})
+    table = summary_table(rows)
+    panels = "\n".join(f"![{r['scene']}]({r['scene']}/panel.png)" for r in rows if "error" not in r)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "summary.md").write_text(
+        f"# mi-displace showcase\n\nReferences capped at {max_spp} spp.\n\n{table}\n{panels}\n")
+    print(table, end="")
+    return 1 if failed else 0
+
+
+def bench_names() -> list[str]:
+    """Modules available under ``mi_displace.bench``."""
+    try:
+        package = importlib.import_module("mi_displace.bench")
+    except ModuleNotFoundError:
+        return []
+    return sorted(m.name for m in pkgutil.iter_modules(package.__path__) if not m.name.startswith("_"))
+
+
+def _cmd_bench(args) -> int:
+    available = bench_names()
+    if args.name not in available:
+        raise UsageError(f"unknown benchmark {args.name!r}; available: {', '.join(available) or 'none'}")
+    module = importlib.import_module(f"mi_displace.bench.{args.name}")
+    result = module.main(json=args.json)
+    return result if isinstance(result, int) else 0
+
+
+COMMANDS = {"render": _cmd_render, "compare": _cmd_compare, "showcase": _cmd_showcase,
+            "bench": _cmd_bench}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``mi-displace`` console script.
+
+    Returns 0 on success; raises ``SystemExit(2)`` on bad input (one line on stderr) and
+    ``SystemExit(1)`` when the LLVM backend is unusable.
+    """
+    import mi_displace
+    from mi_displace.core.backend import LLVMVersionError
+
+    args = build_parser().parse_args(argv)
+    try:
+        mi_displace.init(args.variant)
+        return COMMANDS[args.command](args)
+    except (ValueError, FileNotFoundError) as e:
+        print(f"mi-displace: error: {' '.join(str(e).split())}", file=sys.stderr)
+        raise SystemExit(2) from None
+    except LLVMVersionError as e:
+        print(f"mi-displace: error: {e}", file=sys.stderr)
+        raise SystemExit(1) from None
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,344 @@
+"""The comparison protocol: one scene, rendered as reference and as approximation.
+
+Scene convention
+----------------
+Every comparison scene is one XML file that renders both ways.  At its top level it declares::
+
+    <default name="mode" value="reference"/>        <!-- or "approximation" -->
+    <default name="integrator" value="path"/>
+    <default name="spp" value="64"/>                 <!-- reference samples per pixel -->
+
+and uses ``$mode`` to switch the geometry (``<include filename="parts/ball_$mode.xml"/>``
+or a technique plugin's ``<string name="mode" value="$mode"/>``), ``$integrator`` in
+``<integrator type="$integrator">`` and ``$spp`` in the sampler's ``sample_count``.  Camera,
+lights and materials are shared.  Mitsuba refuses a ``$name`` parameter that the scene does
+not use, so ``mode`` and ``integrator`` must both be used.
+
+Optional top-level defaults that only :func:`compare` reads (they are not passed to Mitsuba,
+so the scene need not use them; ``params`` may override them too):
+
+* ``reference_integrator`` (default ``path``) and ``approximation_integrator`` (default
+  ``raster``): the integrator plugin type of each side;
+* ``approximation_spp``: spp of the approximation render (default: the scene's sampler count;
+  the raster integrator takes one sample at each pixel centre anyway).
+
+A scene is part of the showcase (``mi-displace showcase``) when it contains the comment
+``<!-- showcase -->``.
+
+Procedure
+---------
+1. **Approximation**, ``mode=approximation``: load + render once *cold* (first call in this
+   process: tracing and JIT compilation included, though Dr.Jit's on-disk kernel cache may
+   shorten it), then ``warm_repeats`` (>= 3) more load + render rounds; warm times are medians.
+2. **Reference**, ``mode=reference``: loaded once cold (discarded) and once warm; one 1-spp
+   warm-up render compiles its kernels.  Two independent images (seed streams 0 and 1) are
+   rendered with ``spp`` each.  The *noise floor* is FLIP(image 0, image 1); the reference is
+   their average (``2 * spp`` samples), and the error is FLIP(reference, approximation).
+   While ``noise_floor > target_ratio * flip_mean`` both images get as many new samples
+   again (fresh seeds, so spp doubles each round) until that holds or the reference would
+   exceed ``max_spp`` samples in total, which sets ``spp_capped``.  The noise floor is thus
+   measured between two half-budget images: it overestimates the final reference's noise.
+3. Metrics against the averaged reference: FLIP (LDR sRGB), relMSE (HDR), PSNR, SSIM.
+   ``converged`` says the noise-floor ratio was met; ``within_noise_floor`` says the error is
+   no larger than the noise floor, which is what a consistency scene (DESIGN protocol item 4:
+   raster on the reference geometry) must show — such a scene never "converges" and runs to
+   ``max_spp``.
+
+Times are wall seconds in this process.  ``reference_time_s`` = warm build + every render
+that went into the final reference image; ``approx_time_warm_s`` = median over the warm rounds
+of (build + render); ``speedup = reference_time_s / approx_time_warm_s``, both end to end.
+
+Outputs in ``out_dir``: ``reference.exr``, ``approximation.exr`` (linear float32),
+``panel.png`` (reference | approximation | FLIP heat map) and ``metrics.json``
+(:data:`METRIC_KEYS` and more; a non-finite float such as the PSNR of identical images is
+written as ``null``).
+"""
+from __future__ import annotations
+
+import json
+import math
+import statistics
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mi_displace.core.io import to_srgb, write_exr
+from mi_displace.evaluate import metrics
+from mi_displace.render import scene as scenes
+
+#: XML parameters set by the protocol itself; ``params`` may not set them.
+RESERVED_PARAMS = ("mode", "integrator")
+#: Top-level defaults (or params) read by :func:`compare` and not passed to Mitsuba.
+PROTOCOL_PARAMS = ("reference_integrator", "approximation_integrator", "approximation_spp")
+DEFAULT_INTEGRATORS = {"reference": "path", "approximation": "raster"}
+
+#: Keys always present in ``metrics.json`` and in the dict :func:`compare` returns.
+METRIC_KEYS = (
+    "scene", "params", "variant", "width", "height",
+    "flip_mean", "relmse", "psnr", "ssim", "noise_floor_flip", "target_ratio", "converged",
+    "within_noise_floor",
+    "reference_spp", "max_spp", "spp_capped", "reference_rounds",
+    "reference_integrator", "approximation_integrator", "approximation_spp",
+    "reference_time_s", "reference_build_s", "reference_render_s",
+    "reference_build_cold_s", "reference_render_cold_s",
+    "approx_time_cold_s", "approx_build_cold_s", "approx_render_cold_s",
+    "approx_time_warm_s", "approx_build_s", "approx_render_warm_s", "warm_repeats",
+    "speedup", "build_stats", "mitsuba_version", "drjit_version",
+)
+
+
+def scene_defaults(path: str | Path) -> dict[str, str]:
+    """The ``<default name=... value=...>`` declarations at the top level of a scene file.
+
+    Raises:
+        FileNotFoundError: the file does not exist.
+        ValueError: the file is not well-formed XML.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"scene file {str(path)!r} does not exist")
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as e:
+        raise ValueError(f"scene file {str(path)!r} is not valid XML: {e}") from None
+    return {
+        d.get("name"): d.get("value", "") for d in root.findall("default") if d.get("name")
+    }
+
+
+def protocol_settings(scene_path: str | Path, params: dict | None = None) -> dict:
+    """Check a scene against the convention and split ``params`` for the two sides.
+
+    Returns:
+        dict with ``xml_params`` (passed to Mitsuba on both sides), ``reference_integrator``,
+        ``approximation_integrator`` and ``approximation_spp`` (int or ``None``).
+
+    Raises:
+        FileNotFoundError, ValueError: missing file, convention not followed, bad params.
+    """
+    defaults = scene_defaults(scene_path)
+    missing = [name for name in RESERVED_PARAMS if name not in defaults]
+    if missing:
+        raise ValueError(
+            f"scene {str(scene_path)!r} does not follow the comparison convention: it must "
+            f"declare <default name=...> for {', '.join(missing)} (see mi_displace.evaluate.compare)"
+        )
+    params = scenes.check_params(params)
+    reserved = [name for name in RESERVED_PARAMS if name in params]
+    if reserved:
+        raise ValueError(f"params: {', '.join(reserved)} is set by the comparison protocol itself")
+    settings = {**{k: v for k, v in defaults.items() if k in PROTOCOL_PARAMS},
+                **{k: v for k, v in params.items() if k in PROTOCOL_PARAMS}}
+    approximation_spp = settings.get("approximation_spp")
+    if approximation_spp is not None:
+        if not approximation_spp.isdigit() or int(approximation_spp) < 1:
+            raise ValueError(f"approximation_spp: expected a positive integer, got {approximation_spp!r}")
+        approximation_spp = int(approximation_spp)
+    return {
+        "xml_params": {k: v for k, v in params.items() if k not in PROTOCOL_PARAMS},
+        "reference_integrator": settings.get("reference_integrator", DEFAULT_INTEGRATORS["reference"]),
+        "approximation_integrator": settings.get(
+            "approximation_integrator", DEFAULT_INTEGRATORS["approximation"]),
+        "approximation_spp": approximation_spp,
+    }
+
+
+def _finite_or_none(value):
+    """JSON-friendly value: NumPy scalars to Python, non-finite floats to ``None``."""
+    if isinstance(value, dict):
+        return {str(k): _finite_or_none(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_or_none(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def write_panel(path: str | Path, reference, approximation, error_map, info: dict) -> Path:
+    """Save the PNG panel: reference | approximation | FLIP heat map (magma, 0..1).
+
+    Args:
+        path: output PNG.
+        reference, approximation: linear RGB ``(H, W, 3)`` (shown sRGB-encoded, clipped).
+        error_map: FLIP error ``(H, W)`` in ``[0, 1]``.
+        info: the metrics dict (titles use its numbers).
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    height, width = error_map.shape
+    panel_w = min(4.0, 5.0 * width / height)  # inches; tall images get narrower panels
+    panel_h = panel_w * height / width
+    gap, left, top, bottom, bar_w, bar_labels = 0.1, 0.1, 0.85, 0.1, 0.15, 0.5
+    fig_w = left + 3 * panel_w + 3 * gap + bar_w + bar_labels
+    fig_h = bottom + panel_h + top
+    fig = Figure(figsize=(fig_w, fig_h))
+    FigureCanvasAgg(fig)
+    axes = [
+        fig.add_axes([(left + i * (panel_w + gap)) / fig_w, bottom / fig_h,
+                      panel_w / fig_w, panel_h / fig_h])
+        for i in range(3)
+    ]
+    bar_ax = fig.add_axes([(left + 3 * panel_w + 3 * gap) / fig_w, bottom / fig_h,
+                           bar_w / fig_w, panel_h / fig_h])
+    capped = " (capped)" if info["spp_capped"] else ""
+    titles = [
+        f"reference: {info['reference_integrator']}, {info['reference_spp']} spp{capped}\n"
+        f"{info['reference_time_s']:.3g} s",
+        f"approximation: {info['approximation_integrator']}\n"
+        f"{info['approx_time_warm_s']:.3g} s warm, {info['approx_time_cold_s']:.3g} s cold",
+        f"FLIP {info['flip_mean']:.4f}\nnoise floor {info['noise_floor_flip']:.4f}",
+    ]
+    for ax, image, title in zip(axes[:2], (reference, approximation), titles):
+        ax.imshow(to_srgb(image), interpolation="nearest")
+        ax.set_title(title, fontsize=9)
+    heat = axes[2].imshow(error_map, cmap="magma", vmin=0.0, vmax=1.0, interpolation="nearest")
+    axes[2].set_title(titles[2], fontsize=9)
+    for ax in axes:
+        ax.set_axis_off()
+    fig.colorbar(heat, cax=bar_ax)
+    psnr = "inf" if info["psnr"] is None or not math.isfinite(info["psnr"]) else f"{info['psnr']:.2f}"
+    fig.suptitle(
+        f"{Path(info['scene']).name}: relMSE {info['relmse']:.4g} · PSNR {psnr} dB · "
+        f"SSIM {info['ssim']:.4f} · speed-up {info['speedup']:.3g}×",
+        fontsize=10, y=1 - 0.08 / fig_h, va="top",
+    )
+    path = Path(path)
+    fig.savefig(path, dpi=max(100, min(300, width / panel_w)))
+    return path
+
+
+def _render_side(path, xml_params, mode, integrator, spp) -> tuple[dict, np.ndarray, float]:
+    """Load the scene for one side and render it once (seed 0): (timings, image, seconds).
+
+    The scene is released before returning, so consecutive calls never hold two scenes.
+    """
+    scene, timings = scenes.load(path, **xml_params, mode=mode, integrator=integrator)
+    image, seconds = scenes.render(scene, spp=spp, seed=0)
+    metrics.assert_finite(image, f"{mode} image of {path}")
+    return timings, image, seconds
+
+
+def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024,
+            target_ratio: float = 0.2, warm_repeats: int = 3, progress: bool = False) -> dict:
+    """Run the comparison protocol (module docstring) on one scene and write its outputs.
+
+    Args:
+        scene_path: scene XML following the convention.
+        out_dir: output folder (created).
+        params: extra XML parameters for both sides (not ``mode`` / ``integrator``).
+        max_spp: most samples per pixel of the averaged reference image (>= 2).
+        target_ratio: required ``noise_floor_flip / flip_mean`` (0 < ratio <= 1).
+        warm_repeats: warm load + render rounds of the approximation (>= 3).
+        progress: progress bars for long reference renders.
+
+    Returns:
+        The metrics dict also written to ``out_dir/metrics.json`` (keys: :data:`METRIC_KEYS`).
+    """
+    scene_path = Path(scene_path)
+    settings = protocol_settings(scene_path, params)
+    if not isinstance(max_spp, (int, np.integer)) or max_spp < 2:
+        raise ValueError(f"max_spp: must be an integer >= 2 (two reference seeds), got {max_spp!r}")
+    if not isinstance(target_ratio, (int, float)) or not 0 < target_ratio <= 1:
+        raise ValueError(f"target_ratio: must lie in (0, 1], got {target_ratio!r}")
+    if not isinstance(warm_repeats, (int, np.integer)) or warm_repeats < 3:
+        raise ValueError(f"warm_repeats: must be an integer >= 3, got {warm_repeats!r}")
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ValueError(f"out_dir {str(out_dir)!r} exists and is not a folder")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    xml_params = settings["xml_params"]
+
+    # 1. approximation: cold, then warm rounds
+    approx_int, approx_spp = settings["approximation_integrator"], settings["approximation_spp"]
+    cold, approx, approx_render_cold = _render_side(
+        scene_path, xml_params, "approximation", approx_int, approx_spp)
+    warm_builds, warm_renders = [], []
+    for _ in range(warm_repeats):
+        warm, approx, seconds = _render_side(
+            scene_path, xml_params, "approximation", approx_int, approx_spp)
+        warm_builds.append(warm["build_s"])
+        warm_renders.append(seconds)
+    approx_build_stats = warm["shapes"]
+
+    # 2. reference: cold build (discarded), warm build, warm-up render, converging renders
+    ref_int = settings["reference_integrator"]
+    ref_params = dict(xml_params, mode="reference", integrator=ref_int)
+    ref_scene, ref_cold = scenes.load(scene_path, **ref_params)
+    del ref_scene
+    ref_scene, ref_warm = scenes.load(scene_path, **ref_params)
+    _, reference_render_cold = scenes.render(ref_scene, spp=1, seed=2**31)
+    per_seed = max(1, min(ref_warm["spp"], max_spp // 2))
+    images, count, rounds, render_s, spp_capped = [None, None], 0, [], 0.0, False
+    while True:
+        new = per_seed if count == 0 else count
+        for side in (0, 1):
+            image, seconds = scenes.render(
+                ref_scene, spp=new, seed=2 * len(rounds) + side, progress=progress)
+            metrics.assert_finite(image, f"reference image of {scene_path}")
+            render_s += seconds
+            images[side] = image if count == 0 else (images[side] * count + image * new) / (count + new)
+        count += new
+        reference = 0.5 * (images[0] + images[1])
+        noise_floor, _ = metrics.flip(images[0], images[1])
+        flip_mean, error_map = metrics.flip(reference, approx)
+        rounds.append({"spp": 2 * count, "noise_floor_flip": noise_floor, "flip_mean": flip_mean})
+        if noise_floor <= target_ratio * flip_mean:
+            break
+        if 4 * count > max_spp:
+            spp_capped = True
+            break
+    width, height = reference.shape[1], reference.shape[0]
+
+    # 3. metrics and outputs
+    reference_time = ref_warm["build_s"] + render_s
+    approx_warm = statistics.median(b + r for b, r in zip(warm_builds, warm_renders))
+    info = {
+        "scene": str(scene_path.resolve()),
+        "params": scenes.check_params(params),
+        "variant": mi.variant(),
+        "width": width,
+        "height": height,
+        "flip_mean": flip_mean,
+        "relmse": metrics.relmse(reference, approx),
+        "psnr": metrics.psnr(reference, approx),
+        "ssim": metrics.ssim(reference, approx),
+        "noise_floor_flip": noise_floor,
+        "target_ratio": float(target_ratio),
+        "converged": noise_floor <= target_ratio * flip_mean,
+        "within_noise_floor": flip_mean <= noise_floor,
+        "reference_spp": 2 * count,
+        "max_spp": int(max_spp),
+        "spp_capped": spp_capped,
+        "reference_rounds": rounds,
+        "reference_integrator": ref_int,
+        "approximation_integrator": approx_int,
+        "approximation_spp": approx_spp,
+        "reference_time_s": reference_time,
+        "reference_build_s": ref_warm["build_s"],
+        "reference_render_s": render_s,
+        "reference_build_cold_s": ref_cold["build_s"],
+        "reference_render_cold_s": reference_render_cold,
+        "approx_time_cold_s": cold["build_s"] + approx_render_cold,
+        "approx_build_cold_s": cold["build_s"],
+        "approx_render_cold_s": approx_render_cold,
+        "approx_time_warm_s": approx_warm,
+        "approx_build_s": statistics.median(warm_builds),
+        "approx_render_warm_s": statistics.median(warm_renders),
+        "warm_repeats": int(warm_repeats),
+        "speedup": reference_time / approx_warm,
+        "build_stats": {"reference": ref_warm["shapes"], "approximation": approx_build_stats},
+        "mitsuba_version": mi.__version__,
+        "drjit_version": dr.__version__,
+    }
+    write_exr(out_dir / "reference.exr", reference)
+    write_exr(out_dir / "approximation.exr", approx)
+    write_panel(out_dir / "panel.png", reference, approx, error_map, info)
+    with open(out_dir / "metrics.json", "w") as f:
+        json.dump(_finite_or_none(info), f, indent=2, allow_nan=False)
+    return info

@@ -1,0 +1,129 @@
+"""Image and mesh metrics against hand-computed values."""
+import numpy as np
+import pytest
+import trimesh
+from trimesh.triangles import closest_point
+
+from mi_displace.evaluate import metrics
+
+SRGB_HALF = ((0.5 + 0.055) / 1.055) ** 2.4  # linear value that sRGB-encodes to exactly 0.5
+
+
+def test_assert_finite_names_the_array():
+    a = np.ones((4, 4, 3), dtype=np.float32)
+    assert metrics.assert_finite(a, "ok") is not None
+    a[1, 2, 0] = np.nan
+    a[3, 3, 2] = np.inf
+    with pytest.raises(ValueError, match=r"approximation image: 1 NaN and 1 Inf .*\(1, 2, 0\)"):
+        metrics.assert_finite(a, "approximation image")
+
+
+def test_flip_identical_is_zero_and_grows_with_the_difference():
+    rng = np.random.default_rng(1)
+    ref = rng.uniform(0, 1, (32, 32, 3)).astype(np.float32)
+    mean, error_map = metrics.flip(ref, ref.copy())
+    assert mean == 0.0 and error_map.shape == (32, 32) and error_map.max() == 0.0
+    small, _ = metrics.flip(ref, ref * 0.9)
+    large, _ = metrics.flip(ref, ref * 0.5)
+    assert 0.0 < small < large <= 1.0
+
+
+def test_flip_sees_ldr_values_clipped():
+    # linear 1.0 and 3.0 both encode to sRGB 1.0: no visible difference in LDR
+    mean, _ = metrics.flip(np.ones((16, 16, 3)), np.full((16, 16, 3), 3.0))
+    assert mean == 0.0
+
+
+def test_flip_rejects_mismatched_and_non_finite_images():
+    with pytest.raises(ValueError, match="differ in shape"):
+        metrics.flip(np.zeros((8, 8, 3)), np.zeros((8, 9, 3)))
+    bad = np.zeros((8, 8, 3))
+    bad[0, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="test: 1 NaN"):
+        metrics.flip(np.zeros((8, 8, 3)), bad)
+
+
+def test_relmse_by_hand():
+    ref = np.ones((4, 4, 3))
+    test = np.full((4, 4, 3), 1.1)
+    assert metrics.relmse(ref, test) == pytest.approx(0.01 / 1.01, rel=1e-6)
+    # dark pixels: eps dominates; half the pixels at ref 0 / test 0.1, half exact
+    ref = np.zeros((2, 2, 3))
+    test = np.zeros((2, 2, 3))
+    test[0] = 0.1
+    assert metrics.relmse(ref, test, eps=0.01) == pytest.approx(0.5 * 0.01 / 0.01, rel=1e-6)
+    with pytest.raises(ValueError, match="eps"):
+        metrics.relmse(ref, test, eps=0.0)
+
+
+def test_psnr_by_hand():
+    ref = np.zeros((8, 8, 3))
+    test = np.full((8, 8, 3), SRGB_HALF)  # sRGB 0.5: MSE 0.25, PSNR 10 log10(4)
+    assert metrics.psnr(ref, test) == pytest.approx(10 * np.log10(4.0), abs=1e-4)
+    assert metrics.psnr(ref, ref) == float("inf")
+
+
+def test_ssim_identical_is_one_noise_lowers_it_and_tiny_images_are_refused():
+    rng = np.random.default_rng(2)
+    ref = rng.uniform(0, 1, (24, 24, 3))
+    assert metrics.ssim(ref, ref) == pytest.approx(1.0)
+    assert metrics.ssim(ref, np.clip(ref + rng.normal(0, 0.1, ref.shape), 0, 1)) < 0.95
+    assert metrics.ssim(ref[:5, :5], ref[:5, :5]) == pytest.approx(1.0)  # window shrunk to 5
+    with pytest.raises(ValueError, match="at least 3x3"):
+        metrics.ssim(ref[:2, :2], ref[:2, :2])
+
+
+def _grid(n, z=0.0):
+    """Unit square at height z, n x n cells, two triangles each."""
+    g = np.linspace(0, 1, n + 1)
+    x, y = np.meshgrid(g, g)
+    vertices = np.stack([x.ravel(), y.ravel(), np.full(x.size, z)], axis=1)
+    v = (np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]).ravel()
+    faces = np.concatenate([np.stack([v, v + 1, v + n + 2], 1), np.stack([v, v + n + 2, v + n + 1], 1)])
+    return trimesh.Trimesh(vertices, faces, process=False)
+
+
+def test_mesh_distance_sphere_scaled_by_one_percent():
+    a = trimesh.creation.icosphere(subdivisions=3)
+    b = a.copy()
+    b.apply_scale(1.01)
+    d = metrics.mesh_distance(a, b, samples=20_000)
+    # facets are parallel: the distance is 0.01 x (facet-plane distance from the centre)
+    apothem = np.abs(np.einsum("ij,ij->i", a.face_normals, a.triangles_center)).min()
+    assert 0.01 * apothem - 1e-6 <= d["rms"] <= 0.01 + 1e-6
+    assert 0.01 * apothem - 1e-6 <= d["hausdorff"] <= 0.01 + 1e-6
+    diagonal = np.linalg.norm(a.bounds[1] - a.bounds[0])
+    assert d["diagonal"] == pytest.approx(diagonal)
+    assert d["rms_rel"] == pytest.approx(d["rms"] / diagonal)
+    assert d["hausdorff_rel"] == pytest.approx(d["hausdorff"] / diagonal)
+
+
+def test_mesh_distance_is_exact_between_differently_tessellated_planes():
+    fine, coarse = _grid(20), _grid(1, z=0.3)
+    d = metrics.mesh_distance(fine, (coarse.vertices, coarse.faces), samples=5_000)
+    assert d["rms"] == pytest.approx(0.3, abs=1e-9)
+    assert d["hausdorff"] == pytest.approx(0.3, abs=1e-9)
+
+
+def test_point_mesh_distance_matches_brute_force():
+    rng = np.random.default_rng(3)
+    mesh = trimesh.creation.icosphere(subdivisions=2)
+    mesh.vertices *= rng.uniform(0.5, 1.5, (len(mesh.vertices), 1))  # irregular triangles
+    points = rng.uniform(-2, 2, (300, 3))
+    triangles = mesh.triangles
+    p = np.repeat(points, len(triangles), axis=0)
+    q = closest_point(np.tile(triangles, (len(points), 1, 1)), p)
+    brute = np.linalg.norm(q - p, axis=1).reshape(len(points), -1).min(axis=1)
+    np.testing.assert_allclose(metrics.point_mesh_distance(points, mesh, k=2), brute, atol=1e-12)
+
+
+def test_mesh_distance_bad_input():
+    a = trimesh.creation.icosphere(subdivisions=1)
+    with pytest.raises(ValueError, match="mesh b: faces must be integer indices"):
+        metrics.mesh_distance(a, (a.vertices, a.faces + 1000))
+    with pytest.raises(ValueError, match="samples"):
+        metrics.mesh_distance(a, a, samples=0)
+    nan_vertices = a.vertices.copy()
+    nan_vertices[0, 0] = np.nan
+    with pytest.raises(ValueError, match="mesh a vertices: 1 NaN"):
+        metrics.mesh_distance((nan_vertices, a.faces), a)

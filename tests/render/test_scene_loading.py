@@ -1,0 +1,80 @@
+"""mi_displace.render.scene: load with timings and build stats, render in passes."""
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mi_displace.render import scene as scenes
+
+CONSTANT_SCENE = """<scene version="3.0.0">
+    <default name="spp" value="4"/>
+    <integrator type="path"/>
+    <sensor type="perspective">
+        <sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>
+        <film type="hdrfilm">
+            <integer name="width" value="8"/><integer name="height" value="6"/>
+            <rfilter type="box"/>
+        </film>
+    </sensor>
+    <emitter type="constant"><rgb name="radiance" value="0.25, 0.5, 0.75"/></emitter>
+    {shape}
+</scene>"""
+
+
+def _write(tmp_path, shape="", name="scene.xml"):
+    path = tmp_path / name
+    path.write_text(CONSTANT_SCENE.format(shape=shape))
+    return path
+
+
+def test_render_in_uneven_passes_weights_them_by_spp(variant, tmp_path, monkeypatch):
+    scene, timings = scenes.load(_write(tmp_path), spp=3)
+    assert timings["spp"] == 3 and timings["build_s"] > 0 and timings["shapes"] == []
+    # 8 x 6 pixels, 2 spp per pass: 7 spp render as passes of 2, 2, 2, 1
+    monkeypatch.setattr(scenes, "MAX_SAMPLES_PER_PASS", 8 * 6 * 2)
+    image, seconds = scenes.render(scene, spp=7, seed=5)
+    assert image.shape == (6, 8, 3) and image.dtype == np.float32 and seconds > 0
+    np.testing.assert_allclose(image, np.broadcast_to([0.25, 0.5, 0.75], image.shape), rtol=1e-6)
+
+
+def test_pass_seeds_are_distinct():
+    seeds = {scenes._pass_seed(s, k) for s in range(50) for k in range(50)}
+    assert len(seeds) == 2500
+    assert scenes._pass_seed(7, 0) == 7
+
+
+def test_build_stats_of_python_shapes_are_collected(variant, tmp_path):
+    class Tri(mi.Mesh):
+        def __init__(self, props):
+            super().__init__("tri", 3, 1, props)
+            params = mi.traverse(self)
+            params["vertex_positions"] = mi.Float([0, 0, 1, 1, 0, 1, 0, 1, 1])
+            params["faces"] = mi.UInt32([0, 1, 2])
+            params.update()
+            self.build_stats = {"vertices": 3, "faces": 1}
+
+    mi.register_shape("test_stats_tri", lambda props: Tri(props))
+    _, timings = scenes.load(_write(tmp_path, '<shape type="test_stats_tri" id="t"/>'
+                                              '<shape type="sphere"/>'))
+    assert timings["shapes"] == [{"id": "t", "type": "Tri", "vertices": 3, "faces": 1}]
+
+
+def test_bad_input_is_reported_with_the_file(variant, tmp_path):
+    with pytest.raises(FileNotFoundError, match="nope.xml"):
+        scenes.load(tmp_path / "nope.xml")
+    path = _write(tmp_path)
+    with pytest.raises(ValueError, match=r"scene.xml.*unused parameters.*\$foo=1"):
+        scenes.load(path, foo=1)
+    with pytest.raises(ValueError, match=r'could not parse integer value "x"'):
+        scenes.load(path, spp="x")
+    with pytest.raises(ValueError, match="parameter name"):
+        scenes.load(path, **{"1bad": 2})
+
+    def refuse(props):
+        raise ValueError("refuse: parameter 'scale' must be finite")
+
+    mi.register_shape("test_refuse", refuse)
+    with pytest.raises(ValueError, match="refuse: parameter 'scale' must be finite"):
+        scenes.load(_write(tmp_path, '<shape type="test_refuse"/>', "refuse.xml"))
+    scene, _ = scenes.load(path)
+    with pytest.raises(ValueError, match="spp"):
+        scenes.render(scene, spp=0)
