@@ -70,10 +70,16 @@ def _mesh_level(mesh_data, props, edge_length) -> int:
             raise ValueError(f"displaced: 'edge_length' must be > 0, got {edge_length}")
         pos, faces = mesh_data[0], mesh_data[3]
         mean_edge = float(np.mean(np.linalg.norm(pos[faces] - pos[np.roll(faces, 1, 1)], axis=2)))
-        return max(1, math.ceil(mean_edge / edge_length))
-    level = props.get("subdivision", 1)
-    if int(level) != level or level < 1:
-        raise ValueError(f"displaced: 'subdivision' must be a positive integer, got {level}")
+        level = max(1, math.ceil(mean_edge / edge_length))
+    else:
+        level = props.get("subdivision", 1)
+        if int(level) != level or level < 1:
+            raise ValueError(f"displaced: 'subdivision' must be a positive integer, got {level}")
+    faces = len(mesh_data[3]) * int(level) ** 2
+    if faces > 2 * tessellate.MAX_VERTICES:
+        raise ValueError(f"displaced: subdivision level {level} gives {faces:,} triangles, more "
+                         f"than the limit of {2 * tessellate.MAX_VERTICES:,}; lower "
+                         "'subdivision' or raise 'edge_length'")
     return int(level)
 
 
@@ -93,7 +99,7 @@ class Displaced(mi.Mesh):
 
     def __init__(self, props: mi.Properties):
         base_name = props.get("base", "mesh" if "filename" in props else "sphere")
-        height = props.get("height", None) if "height" in props else None
+        height = props.get("height", None)
         if height is not None and not isinstance(height, mi.Texture):
             raise ValueError("displaced: 'height' must be a nested texture")
         scale = float(props.get("scale", 0.1))
@@ -101,14 +107,16 @@ class Displaced(mi.Mesh):
         for key, val in (("scale", scale), ("midlevel", midlevel)):
             if not math.isfinite(val):
                 raise ValueError(f"displaced: '{key}' must be finite, got {val}")
-        resolution = props.get("resolution", None) if "resolution" in props else None
-        edge_length = props.get("edge_length", None) if "edge_length" in props else None
+        resolution = props.get("resolution", None)
+        edge_length = props.get("edge_length", None)
         to_world = props.get("to_world", mi.ScalarTransform4f())
         if height is not None:
             check_texture_finite(height)
 
         if base_name == "mesh":
-            mesh_data = _load_base_mesh(props.get("filename", ""))
+            if "filename" not in props:
+                raise ValueError("displaced: base 'mesh' needs a 'filename' (PLY/OBJ with UVs)")
+            mesh_data = _load_base_mesh(props.get("filename"))
             base, grid = None, _mesh_level(mesh_data, props, edge_length)
         else:
             base = surfaces.make_base(

@@ -58,6 +58,8 @@ def test_mesh_base(variant, tmp_path):
     assert np.all(np.isfinite(pos)) and np.allclose(np.linalg.norm(nrm, axis=1), 1, atol=1e-5)
     r = np.linalg.norm(pos, axis=1)
     assert r.max() > 1.0 + 0.01  # checkerboard (0.4 / 0.2) pushes vertices out
+    with pytest.raises(Exception, match="triangles, more than the limit"):
+        displaced(base="mesh", filename=str(tmp_path / "ico.ply"), subdivision=4000)
 
 
 @pytest.mark.parametrize("props,match", [
@@ -67,6 +69,7 @@ def test_mesh_base(variant, tmp_path):
     ({"base": "sphere", "radius": -1.0}, "radius"),
     ({"base": "mesh", "filename": "/no/such/file.ply"}, "not found: /no/such/file.ply"),
     ({"base": "sphere", "scale": float("nan")}, "scale"),
+    ({"base": "mesh"}, "needs a 'filename'"),
 ])
 def test_bad_input_is_named(variant, props, match):
     with pytest.raises(Exception, match=match):
