@@ -109,7 +109,9 @@ class Displaced(mi.Mesh):
                 raise ValueError(f"displaced: '{key}' must be finite, got {val}")
         resolution = props.get("resolution", None)
         edge_length = props.get("edge_length", None)
-        to_world = props.get("to_world", mi.ScalarTransform4f())
+        # load_dict/XML hand over a double-precision transform; the mesh is float32
+        to_world = mi.ScalarTransform4f(mi.ScalarMatrix4f(np.array(
+            props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float32)))
         if height is not None:
             check_texture_finite(height)
 

@@ -88,3 +88,20 @@ def test_nan_in_height_bitmap_is_refused(variant, tmp_path):
     mi.Bitmap(h).write(str(tmp_path / "nan.exr"))
     with pytest.raises(Exception, match="NaN/Inf texel"):
         displaced(height={"type": "bitmap", "filename": str(tmp_path / "nan.exr"), "raw": True})
+
+
+@pytest.mark.parametrize("size", [1e-3, 1.0, 1e3])
+def test_extreme_scales_and_far_offsets(variant, size):
+    """Radius and displacement from 1e-3 to 1e3, 1e4 radii away from the origin: finite,
+    watertight, displaced by the requested relative amount."""
+    offset = 1e4 * size
+    s = displaced(base="sphere", radius=size, resolution=64, scale=0.1 * size, midlevel=0.0,
+                  height={"type": "ripples", "frequency": 4.0},
+                  to_world=mi.ScalarTransform4f().translate([offset, 0, 0]))
+    pos, faces, nrm = buffers(s)
+    assert np.all(np.isfinite(pos)) and np.all(np.isfinite(nrm))
+    assert trimesh.Trimesh(pos, faces).is_watertight
+    r = np.linalg.norm(pos - [offset, 0, 0], axis=1) / size
+    # float32 at 1e4 radii from the origin keeps ~1e-3 relative precision of the radius
+    assert r.min() > 1 - 2e-3 and r.max() < 1.1 + 2e-3
+    assert r.max() - r.min() > 0.09  # the ripples are there

@@ -100,3 +100,23 @@ def test_spot_light_is_a_cone(variant):
 def test_bad_parameters(variant):
     with pytest.raises(Exception, match="'aa'"):
         scene({"type": "raster", "aa": 0})
+
+
+def test_grazing_view_and_grazing_light_stay_finite(variant):
+    """Camera and light at 89.5 degrees from a displaced plane's normal."""
+    plane = {"type": "displaced", "base": "plane", "resolution": 128, "scale": 0.002,
+             "height": {"type": "ripples", "frequency": 16.0},
+             "to_world": mi.ScalarTransform4f().scale(10)}
+    grazing = np.tan(np.radians(89.5))
+    sc = mi.load_dict({
+        "type": "scene", "integrator": {"type": "raster", "aa": 2},
+        "sensor": {"type": "perspective", "fov": 20,
+                   "to_world": mi.ScalarTransform4f().look_at(
+                       origin=[0, -grazing * 0.05, 0.05], target=[0, 0, 0], up=[0, 0, 1]),
+                   "film": {"type": "hdrfilm", "width": 64, "height": 64}},
+        "sun": {"type": "directional", "direction": [grazing, 0, -1],
+                "irradiance": {"type": "rgb", "value": 1.0}},
+        "plane": plane})
+    img = render(sc)
+    lit = img.sum(2) > 0
+    assert 0.05 < lit.mean() < 0.95  # ripple flanks facing the light lit, the rest in shadow
