@@ -1,5 +1,4 @@
 """Base surfaces: derivatives and curvatures against finite differences and closed forms."""
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
