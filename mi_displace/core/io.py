@@ -100,13 +100,19 @@ def write_exr(path: str | os.PathLike, image) -> Path:
     return path
 
 
+def _existing(path: str | os.PathLike, kind: str) -> Path:
+    """``Path(path)``, or FileNotFoundError naming the ``kind`` of file and the path."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{kind} file {str(path)!r} does not exist")
+    return path
+
+
 def read_exr(path: str | os.PathLike) -> np.ndarray:
     """Read an OpenEXR file's R, G, B (or Y) channels as linear float32 ``(H, W, 3)``."""
     import OpenEXR
 
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"EXR file {str(path)!r} does not exist")
+    path = _existing(path, "EXR")
     with OpenEXR.File(str(path), separate_channels=True) as f:
         channels = {k: v.pixels for k, v in f.channels().items()}
     if all(c in channels for c in "RGB"):
@@ -147,9 +153,7 @@ def read_png(path: str | os.PathLike) -> np.ndarray:
     """Read an 8- or 16-bit PNG and decode it from sRGB to linear float32 ``(H, W, 3)``."""
     import mitsuba as mi
 
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"PNG file {str(path)!r} does not exist")
+    path = _existing(path, "PNG")
     bitmap = mi.Bitmap(str(path))
     data = np.asarray(bitmap)
     scale = float(np.iinfo(data.dtype).max) if np.issubdtype(data.dtype, np.integer) else 1.0
