@@ -1,0 +1,1 @@
+"""VDM: view-dependent displacement mapping (paper 001)."""
