@@ -9,6 +9,9 @@
   caps the reference at :data:`QUICK_MAX_SPP` samples per pixel.
 * ``bench NAME [--json]`` runs ``mi_displace.bench.NAME.main(json=True/False)`` (JSON or
   plain-text report on stdout).
+* technique commands: every module in :data:`COMMAND_MODULES` defines
+  ``add_commands(sub) -> dict[str, Callable[[argparse.Namespace], int]]``, which adds its
+  sub-parsers to ``sub`` and returns the handler of each command name it added.
 
 Bad input (missing file, bad parameter, unknown name) prints one line to stderr and exits
 with status 2, like argparse's own usage errors; a missing or too old LLVM exits with 1.
@@ -32,6 +35,11 @@ SUMMARY_COLUMNS = (
     ("reference time (s)", "reference_time_s"), ("approx. warm time (s)", "approx_time_warm_s"),
     ("speed-up", "speedup"),
 )
+
+
+# Modules contributing sub-commands (see the module docstring).
+COMMAND_MODULES = [
+]
 
 
 class UsageError(ValueError):
@@ -112,6 +120,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="run a benchmark module mi_displace.bench.NAME")
     p.add_argument("name", help="benchmark name")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
+
+    for name in COMMAND_MODULES:
+        for command, handler in importlib.import_module(name).add_commands(sub).items():
+            sub.choices[command].set_defaults(handler=handler)
     return parser
 
 
@@ -238,7 +250,8 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         mi_displace.init(args.variant)
-        return COMMANDS[args.command](args)
+        handler = getattr(args, "handler", None) or COMMANDS[args.command]
+        return handler(args)
     except (ValueError, FileNotFoundError) as e:
         print(f"mi-displace: error: {' '.join(str(e).split())}", file=sys.stderr)
         raise SystemExit(2) from None
