@@ -14,6 +14,7 @@ PLUGIN_MODULES = [
     "mi_displace.plugins.cells",
     "mi_displace.plugins.displaced",
     "mi_displace.plugins.raster",
+    "mi_displace.plugins.ddm",
 ]
 
 _registered_for: str | None = None

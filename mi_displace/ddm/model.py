@@ -1,0 +1,221 @@
+"""A complete DDM / HDDM set-up: base, tiles, layout, geometry images, mapping, memory.
+
+:class:`DDMModel` is what the ``ddm`` plugin holds and what the benchmark and the tests
+drive directly.  Construction validates everything and does the one-off work (tiles, layout,
+geometry images, pruning, faces) — the *preprocessing phase* of §3.1; :meth:`map` is the
+*interactive phase* of §3.2 (one Dr.Jit kernel over all tile vertices) for a time t and a
+w scale.
+"""
+from __future__ import annotations
+
+import math
+import os
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mi_displace.core import surfaces
+from mi_displace.ddm import animation as anim
+from mi_displace.ddm import base_maps, mapping
+from mi_displace.ddm.layout import make_layout
+from mi_displace.ddm.tiles import Tile, get_tile
+
+BASE_PARAMS = {"plane": (), "sphere": ("radius",), "cylinder": ("radius", "length"),
+               "torus": ("major_radius", "minor_radius"), "teapot": ()}
+
+
+class FoldingWarning(UserWarning):
+    """w exceeds the base's radius of curvature: the mapped volume folds over itself."""
+
+
+def resolve_path(name: str) -> str:
+    """A file name resolved like Mitsuba's own plugins do (relative to the scene file)."""
+    return str(mi.Thread.thread().file_resolver().resolve(str(name)))
+
+
+def make_base(name: str, filename: str | None = None, **params):
+    """A DDM base: ``plane``/``sphere``/``cylinder``/``torus`` (analytic), ``teapot`` (the
+    Utah teapot body, Bezier patches) or ``mesh`` (``filename``: OBJ/PLY with UVs)."""
+    if name == "teapot":
+        from mi_displace.core.bezier import teapot_body
+
+        return teapot_body(filename)
+    if name == "mesh":
+        from mi_displace.ddm.mesh_base import MeshBase
+        from mi_displace.plugins.displaced import _load_base_mesh
+
+        if not filename:
+            raise ValueError("ddm: base 'mesh' needs a 'filename' (PLY/OBJ with UVs)")
+        filename = resolve_path(filename)
+        if not os.path.isfile(filename):
+            raise FileNotFoundError(f"ddm: base mesh 'filename' not found: {filename}")
+        pos, nrm, uvs, faces = _load_base_mesh(filename)
+        return MeshBase(pos, nrm, uvs, faces)
+    return surfaces.make_base(name, **params)
+
+
+def _resolve_tile(spec: str) -> str:
+    spec = spec.strip()
+    return resolve_path(spec) if spec.lower().endswith((".obj", ".ply")) else spec
+
+
+@dataclass
+class DDMConfig:
+    """Every setting of a DDM shape (units in brackets; see docs/ddm.md)."""
+
+    base: str = "sphere"
+    base_params: dict = field(default_factory=dict)
+    filename: str | None = None
+    tile: str = "thorn"                 # name, 'stone:SEED', file, or comma list
+    tile_target: str | None = None      # metamorphosis partner (eq. 3)
+    layout: str = "rect"
+    tiles_u: int = 16
+    tiles_v: int = 8
+    gap_u: float = 0.0
+    gap_v: float = 0.0
+    w_offset: float = 0.0               # [object units]
+    u0: float = 0.0
+    v0: float = 0.0
+    seed: int = 0
+    height: float = 0.1                 # [object units per unit tile z]
+    mode: str = "maps"
+    map_resolution: int = 256
+    normals: str = "tangent"
+    epsilon: float = 1e-3               # [tile units]
+    time: float = 0.0
+    animation: anim.Animation = field(default_factory=anim.Animation)
+
+    def check(self) -> "DDMConfig":
+        self.mode = mapping.MODE_ALIASES.get(self.mode, self.mode)
+        if self.mode not in mapping.MODES:
+            raise ValueError(f"ddm: unknown 'mode' {self.mode!r}; expected exact, maps, "
+                             "reference (= exact) or approximation (= maps)")
+        for key in ("height", "w_offset", "time", "epsilon"):
+            if not math.isfinite(getattr(self, key)):
+                raise ValueError(f"ddm: '{key}' must be finite, got {getattr(self, key)!r}")
+        if not 0 < self.epsilon < 0.5:
+            raise ValueError(f"ddm: 'epsilon' must lie in (0, 0.5) tile units, got {self.epsilon!r}")
+        base_maps.check_resolution(self.map_resolution)
+        if self.base not in BASE_PARAMS and self.base != "mesh":
+            raise ValueError(f"ddm: unknown 'base' {self.base!r}; expected one of "
+                             f"{', '.join(sorted(BASE_PARAMS))} or 'mesh'")
+        return self
+
+
+class DDMModel:
+    """The preprocessed DDM scene element; :meth:`map` maps all tiles at a time t."""
+
+    def __init__(self, cfg: DDMConfig, base=None):
+        start = time.perf_counter()
+        self.cfg = cfg.check()
+        self.tiles: list[Tile] = [get_tile(_resolve_tile(s)) for s in str(cfg.tile).split(",")
+                                  if s.strip()]
+        if not self.tiles:
+            raise ValueError("ddm: 'tile' is empty")
+        self.target = None
+        if cfg.tile_target:
+            if len(self.tiles) != 1:
+                raise ValueError("ddm: 'tile_target' (metamorphosis) needs a single 'tile'")
+            self.target = get_tile(_resolve_tile(cfg.tile_target))
+            anim.check_compatible(self.tiles[0], self.target)
+        layout = make_layout(cfg.layout, cfg.tiles_u, cfg.tiles_v, len(self.tiles), cfg.gap_u,
+                             cfg.gap_v, cfg.u0, cfg.v0, cfg.seed)
+        # size check before any kernel or allocation of the mapped mesh
+        verts = sum(int(np.sum(layout.tile_index == k)) * t.vertex_count
+                    for k, t in enumerate(self.tiles))
+        faces = sum(int(np.sum(layout.tile_index == k)) * t.face_count
+                    for k, t in enumerate(self.tiles))
+        mapping.check_size(verts, faces, f"{cfg.tiles_u} x {cfg.tiles_v} tiles ('tiles_u' x 'tiles_v')")
+        self.base = base if base is not None else make_base(
+            cfg.base, cfg.filename, **cfg.base_params)
+        self._warn_folding()
+        self.maps = None
+        need_maps = cfg.mode == "maps" or not self._all_valid_base()
+        if need_maps:
+            self.maps = base_maps.build_maps(self.base, cfg.map_resolution)
+        self.pruned = 0
+        if self.maps is not None:
+            bounds = np.array([[*t.positions[:, :2].min(0), *t.positions[:, :2].max(0)]
+                               for t in self.tiles])
+            layout, self.pruned = base_maps.prune(layout, bounds, self.maps)
+            if layout.count == 0:
+                raise ValueError("ddm: every tile lies in the invalid region of the base map")
+        self.layout = layout
+        self.placement = mapping.Placement.from_layout(layout, len(self.tiles))
+        self.buffers = mapping.TileBuffers.from_tiles(self.tiles)
+        self.orientation = mapping.orientation(self.base, cfg.height)
+        self.faces = mapping.instance_faces(self.placement, self.buffers,
+                                            [t.faces for t in self.tiles], self.orientation < 0)
+        if self.target is not None:
+            self._target = mapping.TileBuffers.from_tiles([self.target])
+        self.evaluator = (mapping.MapsEvaluator(self.maps) if cfg.mode == "maps"
+                          else mapping.ExactEvaluator(self.base))
+        self.vertex_count = self.placement.vertex_total(self.buffers)
+        self.face_count = dr.width(self.faces)
+        self.build_s = time.perf_counter() - start
+
+    def _all_valid_base(self) -> bool:
+        from mi_displace.ddm.mesh_base import MeshBase
+
+        return not isinstance(self.base, MeshBase)
+
+    def _warn_folding(self) -> None:
+        """Warn when w exceeds the radius of curvature 1/kappa (the map T folds)."""
+        z = np.concatenate([t.positions[:, 2] for t in self.tiles])
+        h = self.cfg.height * (1 + abs(self.cfg.animation.w_amplitude))
+        w_max = max(abs(h * z.max() + self.cfg.w_offset), abs(h * z.min() + self.cfg.w_offset))
+        k_lo, k_hi = self.base.curvature_bounds()
+        kappa = max(abs(k_lo), abs(k_hi))
+        if kappa > 0 and w_max * kappa >= 1:
+            warnings.warn(f"ddm: w up to {w_max:.4g} exceeds the base's smallest radius of "
+                          f"curvature {1 / kappa:.4g}: T(u, v, w) folds there (tiles turn "
+                          "inside out; output stays finite)", FoldingWarning, stacklevel=3)
+
+    def tile_buffers_at(self, t: float):
+        """The tile arrays at time t: the metamorphosed tile (eq. 3) or the stored ones."""
+        if self.target is None:
+            return None
+        alpha = self.cfg.animation.alpha(t)
+        p, n = anim.metamorphose(self.buffers.positions, self.buffers.normals,
+                                 self._target.positions, self._target.normals, alpha)
+        t1, t2 = anim.tangent_frame(n)
+        return p, n, t1, t2
+
+    def map(self, t: float | None = None, height: float | None = None, method: str | None = None,
+            evaluator=None):
+        """Map every tile vertex (§3.2) at time ``t`` with w scale ``height``.
+
+        Returns:
+            ``(positions, normals, uv)`` Dr.Jit arrays (object space).
+        """
+        cfg = self.cfg
+        t = cfg.time if t is None else float(t)
+        height = cfg.height if height is None else float(height)
+        a = cfg.animation
+        return mapping.map_tiles(evaluator or self.evaluator, self.placement, self.buffers,
+                                 a.affine(t), height * a.w_factor(t), cfg.w_offset,
+                                 method or cfg.normals, cfg.epsilon, self.tile_buffers_at(t),
+                                 self.orientation)
+
+    def memory_report(self) -> dict:
+        """Bytes HDDM stores (tile(s) + offsets + maps) against the explicit mapped mesh."""
+        tile_bytes = sum(t.nbytes for t in self.tiles) + (self.target.nbytes if self.target else 0)
+        maps_bytes = self.maps.nbytes if (self.maps is not None and self.cfg.mode == "maps") else 0
+        offsets_bytes = self.layout.count * 2 * 4
+        mesh_bytes = self.vertex_count * (3 + 3 + 2) * 4 + self.face_count * 3 * 4
+        hddm = tile_bytes + maps_bytes + offsets_bytes
+        return {"tile_bytes": tile_bytes, "maps_bytes": maps_bytes, "offsets_bytes": offsets_bytes,
+                "hddm_bytes": hddm, "mesh_bytes": mesh_bytes, "mesh_over_hddm": mesh_bytes / hddm}
+
+    def stats(self) -> dict:
+        """Build figures for ``build_stats`` / the report."""
+        s = {"mode": self.cfg.mode, "tiles_placed": self.layout.count, "tiles_pruned": self.pruned,
+             "vertices": self.vertex_count, "faces": self.face_count, "build_s": self.build_s,
+             **self.memory_report()}
+        if self.maps is not None:
+            s.update(map_resolution=self.maps.ru, **self.maps.stats)
+        return s

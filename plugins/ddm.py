@@ -1,0 +1,123 @@
+"""``<shape type="ddm">``: a base surface tiled with copies of detail tiles through
+T(u, v, w) = S(u, v) + n(u, v) w (DDM, eq. 1) or its geometry-image form (HDDM, eq. 2).
+
+.. code-block:: xml
+
+    <shape type="ddm" id="thorns">
+        <string name="base" value="sphere"/>        <!-- plane|sphere|cylinder|torus|teapot|mesh -->
+        <float name="radius" value="1"/>
+        <string name="tile" value="thorn"/>         <!-- thorn|flower|chain|hair|hexagon|stone[:SEED]|file.obj, comma list -->
+        <string name="layout" value="rect"/>        <!-- rect|hex|alternate|random -->
+        <integer name="tiles_u" value="32"/>
+        <integer name="tiles_v" value="16"/>
+        <float name="height" value="0.15"/>         <!-- object units per unit tile z -->
+        <string name="mode" value="maps"/>          <!-- exact|maps (reference|approximation) -->
+        <integer name="map_resolution" value="256"/>
+        <string name="normals" value="tangent"/>    <!-- tangent|jacobian|naive -->
+        <bsdf type="diffuse"/>
+    </shape>
+
+Every parameter is described in ``docs/ddm.md``.  ``time`` and ``height`` are editable
+through ``mi.traverse``: changing them re-maps the vertices (positions, normals) in place,
+keeping faces, geometry images and tiles.
+"""
+from __future__ import annotations
+
+import time
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mi_displace.ddm.animation import Animation
+from mi_displace.ddm.model import BASE_PARAMS, DDMConfig, DDMModel
+
+FLOAT_KEYS = ("gap_u", "gap_v", "w_offset", "u0", "v0", "height", "epsilon", "time")
+INT_KEYS = ("tiles_u", "tiles_v", "seed", "map_resolution")
+STRING_KEYS = ("base", "filename", "tile", "tile_target", "layout", "mode", "normals")
+ANIMATION_KEYS = ("velocity_u", "velocity_v", "rotation_rate", "w_amplitude", "w_frequency",
+                  "alpha0", "alpha_rate")
+
+
+def config_from_props(props: mi.Properties) -> DDMConfig:
+    """Read a :class:`DDMConfig` from plugin properties (every key optional)."""
+    cfg = DDMConfig()
+    for key in STRING_KEYS:
+        if key in props:
+            setattr(cfg, key, str(props.get(key)))
+    for key in FLOAT_KEYS:
+        if key in props:
+            setattr(cfg, key, float(props.get(key)))
+    for key in INT_KEYS:
+        if key in props:
+            setattr(cfg, key, int(props.get(key)))
+    cfg.base_params = {k: float(props.get(k)) for k in BASE_PARAMS.get(cfg.base, ()) if k in props}
+    cfg.animation = Animation(**{k: float(props.get(k)) for k in ANIMATION_KEYS if k in props})
+    return cfg
+
+
+class DDM(mi.Mesh):
+    """Tiles mapped over a base; a mi.Mesh whose vertices a Dr.Jit kernel writes."""
+
+    def __init__(self, props: mi.Properties):
+        self.model = DDMModel(config_from_props(props))
+        m = self.model
+        super().__init__(props.id() or "ddm", m.vertex_count, m.face_count, props, True, True)
+        self.to_world = mi.ScalarTransform4f(mi.ScalarMatrix4f(np.array(
+            props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float32)))
+        self.time = mi.Float(m.cfg.time)
+        self.height = mi.Float(m.cfg.height)
+        params = mi.traverse(self)
+        params["faces"] = dr.ravel(m.faces)
+        params.update()
+        self._remap()
+        stats = m.stats()
+        mi.Log(mi.LogLevel.Info,
+               f"ddm {self.id()!r}: {stats['tiles_placed']} tiles ({stats['tiles_pruned']} pruned), "
+               f"{stats['vertices']:,} vertices; HDDM stores {stats['hddm_bytes']:,} bytes "
+               f"(tiles {stats['tile_bytes']:,} + maps {stats['maps_bytes']:,}) against "
+               f"{stats['mesh_bytes']:,} for the explicit mesh")
+
+    def _remap(self) -> None:
+        """Map the tiles at the current time / height and write the vertex buffers."""
+        start = time.perf_counter()
+        positions, normals, uv = self.model.map(self.time[0], self.height[0])
+        to_world = mi.Transform4f(self.to_world)
+        params = mi.traverse(self)
+        params["vertex_positions"] = dr.ravel(to_world @ positions)
+        params["vertex_normals"] = dr.ravel(dr.normalize(to_world @ mi.Normal3f(normals)))
+        params["vertex_texcoords"] = dr.ravel(uv)
+        params.update()
+        ok = dr.all(dr.isfinite(params["vertex_positions"])) & dr.all(
+            dr.isfinite(params["vertex_normals"]))
+        if not ok[0]:
+            raise ValueError(f"ddm: mapping of {self.id()!r} produced NaN/Inf (check 'height', "
+                             "'w_offset' and the tile)")
+        self.build_stats = {**self.model.stats(), "map_s": time.perf_counter() - start,
+                            "bytes": self.model.memory_report()["mesh_bytes"]}
+        if self.model.maps is not None and self.model.pruned >= 0 and not self.model.maps.valid.all():
+            self.build_stats["clamped_vertices"] = int(np.sum(~self.model.maps.texel_valid(uv.x, uv.y)))
+
+    def traverse(self, cb):
+        super().traverse(cb)
+        cb.put("time", self.time, mi.ParamFlags.NonDifferentiable)
+        cb.put("height", self.height, mi.ParamFlags.NonDifferentiable)
+
+    def parameters_changed(self, keys=[]):
+        if "time" in keys or "height" in keys:
+            for key, value in (("time", self.time), ("height", self.height)):
+                if not np.isfinite(value[0]):
+                    raise ValueError(f"ddm: '{key}' must be finite, got {value[0]}")
+            self._remap()
+        else:
+            super().parameters_changed(keys)
+
+    def to_string(self):
+        s = self.model.stats()
+        return (f"DDM[mode={s['mode']}, tiles={s['tiles_placed']} (pruned {s['tiles_pruned']}), "
+                f"vertices={s['vertices']}, hddm_bytes={s['hddm_bytes']}, "
+                f"mesh_bytes={s['mesh_bytes']}]")
+
+
+def register():
+    mi.register_shape("ddm", lambda props: DDM(props))
