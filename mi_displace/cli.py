@@ -39,6 +39,7 @@ SUMMARY_COLUMNS = (
 
 # Modules contributing sub-commands (see the module docstring).
 COMMAND_MODULES = [
+    "mi_displace.ddm.cli",
 ]
 
 
