@@ -1,0 +1,97 @@
+"""``<shape type="vdm_mesh">``: a coarse base mesh that carries its curvature for VDM.
+
+.. code-block:: xml
+
+    <shape type="vdm_mesh">
+        <string name="base" value="torus"/>          <!-- plane | sphere | cylinder | torus -->
+        <float name="major_radius" value="1"/>
+        <float name="minor_radius" value="0.4"/>
+        <integer name="resolution" value="64"/>       <!-- cells along u (coarse!) -->
+        <!-- or: <string name="filename" value="mesh.obj"/> (PLY/OBJ with UVs) -->
+        <bsdf type="vdm"> ... </bsdf>
+    </shape>
+
+It is the undisplaced base (the reference surface of the paper) as an ordinary triangle
+mesh, plus per-vertex curvature tensors estimated *on this mesh* (the same estimator for
+parametric and file bases; :mod:`mi_displace.vdm.mesh_curvature`) stored as mesh
+attributes ``vertex_vdm_kdiag`` / ``vertex_vdm_koff``, which the ``vdm`` BSDF interpolates
+per pixel for c_V.  On construction it hands the measured curvatures and tile size to its
+``vdm`` BSDF, which builds its table over exactly that curvature range.
+
+Design note: the curvature could be attached to any Mitsuba mesh with ``add_attribute``,
+but the BSDF must learn the curvature range before the first kernel is traced, and a BSDF
+cannot see its shape; a shape that owns the estimate and calls ``bsdf.attach`` solves both.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mi_displace.core import surfaces, tessellate
+from mi_displace.plugins.displaced import BASE_PARAMS, _load_base_mesh
+from mi_displace.vdm import mesh_curvature
+from mi_displace.vdm.steps import KDIAG, KOFF
+
+
+def _columns(v) -> np.ndarray:
+    return np.stack([np.asarray(c) for c in v], 1)
+
+
+def base_geometry(props: mi.Properties):
+    """(positions, normals, uvs, faces) NumPy arrays of the undisplaced base (object space)."""
+    if "filename" in props:
+        return _load_base_mesh(props.get("filename"))
+    name = props.get("base", "sphere")
+    base = surfaces.make_base(name, **{k: float(props.get(k)) for k in BASE_PARAMS.get(name, ())
+                                       if k in props})
+    nu, nv = tessellate.grid_resolution(base, props.get("resolution", 64), props.get("edge_length", None))
+    t = tessellate.displace_parametric(base, None, 0.0, 0.0, nu, nv)
+    return (_columns(t.positions), _columns(t.normals), _columns(t.texcoords), _columns(t.faces))
+
+
+class VDMMesh(mi.Mesh):
+    """The coarse reference surface with per-vertex curvature tensors (attributes)."""
+
+    def __init__(self, props: mi.Properties):
+        start = time.perf_counter()
+        pos, nrm, uvs, faces = base_geometry(props)
+        m = np.array(props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float64)
+        pos = pos @ m[:3, :3].T + m[:3, 3]
+        nrm = nrm @ np.linalg.inv(m[:3, :3])
+        nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
+        if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(nrm))):
+            raise ValueError("vdm_mesh: the base has NaN/Inf positions or normals")
+        super().__init__(props.id() or "vdm_mesh", len(pos), len(faces), props, True, True)
+        params = mi.traverse(self)
+        params["vertex_positions"] = mi.Float(pos.astype(np.float32).ravel())
+        params["vertex_normals"] = mi.Float(nrm.astype(np.float32).ravel())
+        params["vertex_texcoords"] = mi.Float(np.asarray(uvs, np.float32).ravel())
+        params["faces"] = mi.UInt32(np.asarray(faces, np.uint32).ravel())
+        params.update()
+        K, c_max, c_min = mesh_curvature.curvature_tensors(pos, nrm, faces)
+        diag, off = mesh_curvature.pack(K)
+        self.add_attribute(KDIAG, 3, mi.Float(diag.ravel()))
+        self.add_attribute(KOFF, 3, mi.Float(off.ravel()))
+        self.c_max, self.c_min = c_max, c_min
+        self.build_stats = {"vertices": len(pos), "faces": len(faces),
+                            "curvature_min": float(c_min.min()), "curvature_max": float(c_max.max())}
+        bsdf = self.bsdf()
+        if hasattr(bsdf, "attach"):
+            tiling = getattr(bsdf, "tiling", (1.0, 1.0))
+            tile, spread = mesh_curvature.tile_scale(pos, uvs, faces, tiling)
+            bsdf.attach({"tile_size": tile, "tile_spread": spread, "c_max": c_max,
+                         "c_min": c_min, "name": self.id()})
+            self.build_stats.update({k: v for k, v in bsdf.stats.items()
+                                     if isinstance(v, (int, float, bool))})
+        self.build_stats["build_s"] = time.perf_counter() - start
+
+    def to_string(self):
+        return f"VDMMesh[vertices={self.vertex_count()}, faces={self.face_count()}]"
+
+
+def register():
+    mi.register_shape("vdm_mesh", lambda props: VDMMesh(props))
