@@ -34,10 +34,10 @@ class FoldingWarning(UserWarning):
 
 def resolve_path(name: str) -> str:
     """A file name resolved like Mitsuba's own plugins do (relative to the scene file)."""
-    return str(mi.Thread.thread().file_resolver().resolve(str(name)))
+    return str(mi.file_resolver().resolve(str(name)))
 
 
-def make_base(name: str, filename: str | None = None, **params):
+def make_base(name: str, filename: str | None = None, clamp_resolution: int = 512, **params):
     """A DDM base: ``plane``/``sphere``/``cylinder``/``torus`` (analytic), ``teapot`` (the
     Utah teapot body, Bezier patches) or ``mesh`` (``filename``: OBJ/PLY with UVs)."""
     if name == "teapot":
@@ -54,7 +54,8 @@ def make_base(name: str, filename: str | None = None, **params):
         if not os.path.isfile(filename):
             raise FileNotFoundError(f"ddm: base mesh 'filename' not found: {filename}")
         pos, nrm, uvs, faces = _load_base_mesh(filename)
-        return MeshBase(pos, nrm, uvs, faces)
+        return MeshBase(pos, nrm, uvs, faces, base_maps.check_resolution(
+            clamp_resolution, "clamp_resolution"))
     return surfaces.make_base(name, **params)
 
 
@@ -84,6 +85,7 @@ class DDMConfig:
     height: float = 0.1                 # [object units per unit tile z]
     mode: str = "maps"
     map_resolution: int = 256
+    clamp_resolution: int = 512         # mesh bases, exact mode: nearest-valid clamp map
     normals: str = "tangent"
     epsilon: float = 1e-3               # [tile units]
     time: float = 0.0
@@ -122,16 +124,21 @@ class DDMModel:
                 raise ValueError("ddm: 'tile_target' (metamorphosis) needs a single 'tile'")
             self.target = get_tile(_resolve_tile(cfg.tile_target))
             anim.check_compatible(self.tiles[0], self.target)
+        # size checks before any kernel or allocation: first a lower bound from the cell
+        # count (so that even the layout arrays are never allocated for absurd counts)
+        what = f"{cfg.tiles_u} x {cfg.tiles_v} tiles ('tiles_u' x 'tiles_v')"
+        cells = int(cfg.tiles_u) * int(cfg.tiles_v) if cfg.tiles_u >= 1 and cfg.tiles_v >= 1 else 0
+        mapping.check_size(cells * min(t.vertex_count for t in self.tiles),
+                           cells * min(t.face_count for t in self.tiles), what)
         layout = make_layout(cfg.layout, cfg.tiles_u, cfg.tiles_v, len(self.tiles), cfg.gap_u,
                              cfg.gap_v, cfg.u0, cfg.v0, cfg.seed)
-        # size check before any kernel or allocation of the mapped mesh
         verts = sum(int(np.sum(layout.tile_index == k)) * t.vertex_count
                     for k, t in enumerate(self.tiles))
         faces = sum(int(np.sum(layout.tile_index == k)) * t.face_count
                     for k, t in enumerate(self.tiles))
-        mapping.check_size(verts, faces, f"{cfg.tiles_u} x {cfg.tiles_v} tiles ('tiles_u' x 'tiles_v')")
+        mapping.check_size(verts, faces, what)
         self.base = base if base is not None else make_base(
-            cfg.base, cfg.filename, **cfg.base_params)
+            cfg.base, cfg.filename, cfg.clamp_resolution, **cfg.base_params)
         self._warn_folding()
         self.maps = None
         need_maps = cfg.mode == "maps" or not self._all_valid_base()

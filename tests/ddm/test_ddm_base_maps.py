@@ -1,0 +1,129 @@
+"""Geometry images (§3.1), the shader-style lookup (§3.2), diffusion fill and pruning (§4.1)."""
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from mi_displace.core.surfaces import BaseSurface, SurfaceSample, make_base
+from mi_displace.ddm import base_maps
+from mi_displace.ddm.layout import make_layout
+
+
+def _np(v):
+    return np.stack([np.asarray(c) for c in v], 1)
+
+
+def test_texels_hold_the_base_and_lookup_interpolates_them(variant):
+    base = make_base("torus", major_radius=1.0, minor_radius=0.4)
+    maps = base_maps.build_maps(base, 16, 12)
+    u, v = base_maps.texel_coordinates(16, 12, True, True)
+    s = base.sample(u, v)
+    assert np.allclose(_np(maps.position), _np(s.p), atol=1e-6)
+    p, n = maps.lookup(u, v)               # at texel coordinates: the texel values
+    assert np.allclose(_np(p), _np(s.p), atol=1e-5)
+    # midway between texels: the mean of the four neighbours (bilinear)
+    p_mid, _ = maps.lookup(mi.Float(0.5 / 16), mi.Float(0.5 / 12))
+    corners = base.sample(mi.Float([0, 1 / 16, 0, 1 / 16]), mi.Float([0, 0, 1 / 12, 1 / 12]))
+    assert np.allclose(_np(p_mid)[0], _np(corners.p).mean(0), atol=1e-5)
+
+
+def test_lookup_derivatives_match_finite_differences(variant):
+    base = make_base("sphere", radius=1.3)
+    maps = base_maps.build_maps(base, 32)
+    rng = np.random.default_rng(1)
+    # points away from texel edges so the finite difference stays inside one texel
+    cell = rng.integers(1, 30, (200, 2))
+    frac = rng.uniform(0.2, 0.8, (200, 2))
+    u = mi.Float((cell[:, 0] + frac[:, 0]) / 32)
+    v = mi.Float((cell[:, 1] + frac[:, 1]) / 31)
+    _, _, (p_u, p_v, n_u, n_v) = maps.lookup(u, v, True)
+    h = 1e-3 / 32
+    for d, (du, dv) in ((p_u, (h, 0)), (p_v, (0, h))):
+        a, _ = maps.lookup(u + du, v + dv)
+        b, _ = maps.lookup(u - du, v - dv)
+        fd = (_np(a) - _np(b)) / (2 * h)
+        assert np.allclose(fd, _np(d), rtol=2e-2, atol=2e-2)
+    a = maps.lookup(u + h, v)[1]
+    b = maps.lookup(u - h, v)[1]
+    assert np.allclose((_np(a) - _np(b)) / (2 * h), _np(n_u), atol=2e-2)
+
+
+def test_periodic_maps_wrap_without_cracks(variant):
+    base = make_base("torus", major_radius=1.0, minor_radius=0.3)
+    maps = base_maps.build_maps(base, 24)
+    v = mi.Float(np.linspace(0, 1, 50))
+    for shift in (1.0, -1.0, 2.0):
+        a, _ = maps.lookup(dr.zeros(mi.Float, 50) + 0.013, v)
+        b, _ = maps.lookup(dr.zeros(mi.Float, 50) + 0.013 + shift, v + shift)
+        assert np.allclose(_np(a), _np(b), atol=1e-5)
+    a, _ = maps.lookup(dr.zeros(mi.Float, 50) + (1 - 1e-6), v)
+    b, _ = maps.lookup(dr.zeros(mi.Float, 50), v)
+    assert np.abs(_np(a) - _np(b)).max() < 1e-4
+
+
+def test_diffusion_fill_finds_nearly_the_nearest_valid_texel():
+    rng = np.random.default_rng(3)
+    valid = ndimage.binary_dilation(rng.random((90, 70)) > 0.997, iterations=3)
+    valid[40:50, 10:60] = True
+    src, sweeps = base_maps.diffuse_fill(valid, False, False)
+    yy, xx = np.mgrid[0:90, 0:70]
+    d_ours = np.hypot(src // 70 - yy, src % 70 - xx)
+    d_edt = ndimage.distance_transform_edt(~valid)
+    assert np.all(valid.ravel()[src.ravel()])          # every texel points at a valid one
+    assert np.array_equal(src[valid], np.flatnonzero(valid))
+    assert np.all(d_ours >= d_edt - 1e-9)
+    excess = d_ours - d_edt   # the diffusion approximates the distance transform (§4.1)
+    assert np.mean(excess < 1e-6) > 0.9
+    assert np.mean(excess) < 0.2 and np.percentile(excess, 99) < 4.0
+    assert sweeps >= np.max(np.maximum(np.abs(src // 70 - yy), np.abs(src % 70 - xx)))
+
+
+def test_diffusion_wraps_on_periodic_axes():
+    valid = np.zeros((8, 20), bool)
+    valid[:, 0] = True
+    src, _ = base_maps.diffuse_fill(valid, True, False)
+    assert np.all(src[:, 19] % 20 == 0)   # the right edge takes the column across the seam
+    with pytest.raises(ValueError, match="no valid texel"):
+        base_maps.diffuse_fill(np.zeros((4, 4), bool), False, False)
+
+
+class _PinchedPlane(BaseSurface):
+    """The plane with a NaN normal on a band of texels (degenerate normal map)."""
+    name = "pinched"
+
+    def sample(self, u, v):
+        s = make_base("plane").sample(u, v)
+        bad = (u > 0.4) & (u < 0.6)
+        n = dr.select(bad, mi.Vector3f(dr.nan, dr.nan, dr.nan), s.n)
+        return SurfaceSample(s.p, s.dp_du, s.dp_dv, n, s.dn_du, s.dn_dv)
+
+
+def test_degenerate_normal_texels_are_invalid_and_filled(variant):
+    maps = base_maps.build_maps(_PinchedPlane(), 21)
+    assert maps.stats["invalid_texels"] == 21 * 3
+    assert np.all(np.isfinite(_np(maps.normal)))
+    p, n = maps.lookup(mi.Float([0.5, 0.45]), mi.Float([0.5, 0.2]))
+    assert np.all(np.isfinite(_np(n))) and np.allclose(_np(n), [0, 0, 1])
+
+
+def test_one_texel_and_bad_resolutions(variant):
+    maps = base_maps.build_maps(make_base("sphere"), 1)
+    p, n = maps.lookup(mi.Float([0.0, 0.7]), mi.Float([0.1, 0.9]))
+    assert np.all(np.isfinite(_np(p))) and np.allclose(_np(p)[0], _np(p)[1])
+    for bad in (0, -3, 2.5, base_maps.MAX_MAP_RESOLUTION + 1):
+        with pytest.raises(ValueError, match="map_resolution"):
+            base_maps.build_maps(make_base("sphere"), bad)
+
+
+def test_pruning_counts_tiles_without_valid_texels(variant):
+    maps = base_maps.build_maps(make_base("plane"), 40)
+    maps.valid[:, 20:] = False            # right half invalid (texel columns 20..39)
+    lay = make_layout("rect", 8, 4)
+    kept, pruned = base_maps.prune(lay, np.array([[0.0, 0.0, 1.0, 1.0]]), maps)
+    # tile columns 0..3 reach texel <= 20 (one-texel margin): columns 4.. are pruned except 4
+    u_cols = np.round(kept.offsets[:, 0] * 8).astype(int)
+    assert pruned == 4 * 3 and set(u_cols.tolist()) == {0, 1, 2, 3, 4}
+    small = np.array([[0.4, 0.4, 0.6, 0.6]])   # a tile covering only its cell's centre
+    _, pruned_small = base_maps.prune(lay, small, maps)
+    assert pruned_small == 4 * 4

@@ -1,0 +1,152 @@
+"""The DDM / HDDM mapping (eq. 1-2), the normal methods (§3.2) and the extremes."""
+import warnings
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mi_displace.ddm import normals as nrm
+from mi_displace.ddm.animation import Animation
+from mi_displace.ddm.model import DDMConfig, DDMModel, FoldingWarning
+
+
+def _np(v):
+    return np.stack([np.asarray(c) for c in v], 1)
+
+
+def _model(**kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FoldingWarning)
+        return DDMModel(DDMConfig(**kw))
+
+
+def test_plane_mapping_is_the_analytic_map_in_both_modes(variant):
+    for mode in ("exact", "maps"):
+        m = _model(base="plane", tile="stone:2", tiles_u=4, tiles_v=3, height=0.2, w_offset=0.05,
+                   mode=mode, map_resolution=8)
+        p, n, uv = m.map(method="jacobian")
+        tile = m.tiles[0].positions
+        k = np.arange(m.vertex_count) % len(tile)
+        inst = np.arange(m.vertex_count) // len(tile)
+        u = m.layout.offsets[inst, 0] + m.layout.size[0] * tile[k, 0]
+        v = m.layout.offsets[inst, 1] + m.layout.size[1] * tile[k, 1]
+        expect = np.stack([2 * u - 1, 2 * v - 1, 0.2 * tile[k, 2] + 0.05], 1)
+        assert np.allclose(_np(p), expect, atol=1e-5), mode   # bilinear is exact on a plane
+        assert np.allclose(_np(uv), np.stack([u, v], 1), atol=1e-6)
+        # a flat plane scales x, y by (2 su, 2 sv) and z by height: normals follow J^-T
+        scale = np.array([2 * m.layout.size[0], 2 * m.layout.size[1], 0.2])
+        tn = m.tiles[0].normals[k] / scale
+        tn /= np.linalg.norm(tn, axis=1, keepdims=True)
+        assert np.allclose(_np(n), tn, atol=1e-4)
+
+
+def test_sphere_exact_mapping_lifts_by_w(variant):
+    m = _model(base="sphere", base_params={"radius": 1.5}, tile="hexagon", layout="hex",
+               tiles_u=12, tiles_v=8, height=0.1, mode="exact")
+    p, _, _ = m.map()
+    z = np.tile(m.tiles[0].positions[:, 2], m.layout.count)
+    assert np.allclose(np.linalg.norm(_np(p), axis=1), 1.5 + 0.1 * z, atol=2e-5)
+
+
+def test_maps_converge_to_exact_at_second_order(variant):
+    from mi_displace.ddm import accuracy
+    rows = accuracy.geometric_accuracy(DDMConfig(**accuracy.THORNS_SPHERE), (32, 64, 128))
+    rms = [r["rms_error_rel"] for r in rows]
+    assert rms[0] < 2e-3
+    for a, b in zip(rms, rms[1:]):
+        assert 3.0 < a / b < 5.0            # bilinear geometry image: error ~ 1/R^2
+    assert rows[-1]["normal_mean_deg"] < rows[0]["normal_mean_deg"]
+
+
+def test_normal_methods_against_the_mapped_faces(variant):
+    m = _model(base="torus", base_params={"major_radius": 1.0, "minor_radius": 0.4},
+               tile="stone:3", tiles_u=24, tiles_v=12, height=0.08, mode="exact")
+    faces = np.stack([np.asarray(c) for c in m.faces], 1)
+    p, truth, _ = m.map(method="jacobian")
+    P = _np(p)
+    fn = np.cross(P[faces[:, 1]] - P[faces[:, 0]], P[faces[:, 2]] - P[faces[:, 0]])
+    acc = np.zeros_like(P)
+    for c in range(3):
+        np.add.at(acc, faces[:, c], fn)
+    mesh_n = acc / np.linalg.norm(acc, axis=1, keepdims=True)
+    # jacobian normals agree with the mapped mesh's own face normals (independent truth)
+    agree = np.einsum("ij,ij->i", mesh_n, _np(truth))
+    assert np.median(agree) > 0.995 and np.mean(agree > 0.9) > 0.97
+    err = {}
+    for method in nrm.METHODS:
+        _, n, _ = m.map(method=method)
+        err[method] = np.asarray(nrm.angle_error_deg(n, truth))
+    assert err["jacobian"].max() == 0
+    assert err["tangent"].mean() < 0.2 and err["tangent"].max() < 3
+    assert err["naive"].mean() > 10 * err["tangent"].mean()    # why the paper rejects it
+
+
+def test_tiles_crossing_the_seam_wrap_without_cracks(variant):
+    for mode in ("exact", "maps"):
+        kw = dict(base="sphere", tile="thorn", tiles_u=8, tiles_v=4, height=0.2, mode=mode,
+                  map_resolution=64)
+        m = _model(u0=0.5 / 8, **kw)          # the last column straddles u = 1
+        p, _, uv = m.map()
+        P, UV = _np(p), _np(uv)
+        assert np.all(np.isfinite(P)) and UV[:, 0].max() > 1.0
+        tile = m.tiles[0].positions
+        nv = len(tile)
+        plate = tile[:, 2] == 0
+        right = np.flatnonzero(plate & np.isclose(tile[:, 0], 1.0))
+        left = np.flatnonzero(plate & np.isclose(tile[:, 0], 0.0))
+        right = right[np.argsort(tile[right, 1])]
+        left = left[np.argsort(tile[left, 1])]
+        for row in range(4):                  # instances are row-major, u fastest
+            last, first = row * 8 + 7, row * 8
+            crack = np.abs(P[last * nv + right] - P[first * nv + left]).max()
+            assert crack < 2e-5, (mode, row, crack)
+        # the same layout shifted by a whole period maps to the same points
+        p2, _, _ = _model(u0=0.5 / 8 - 1.0, **kw).map()
+        assert np.abs(_np(p2) - P).max() < 2e-5
+
+
+def test_folding_is_flagged_and_stays_finite(variant):
+    with pytest.warns(FoldingWarning, match="radius of curvature"):
+        m = DDMModel(DDMConfig(base="sphere", tile="thorn", tiles_u=8, tiles_v=4, height=-3.0,
+                               mode="maps", map_resolution=16))
+    p, n, _ = m.map()
+    assert np.all(np.isfinite(_np(p))) and np.all(np.isfinite(_np(n)))
+    assert np.allclose(np.linalg.norm(_np(n), axis=1), 1, atol=1e-4)
+
+
+def test_memory_report_and_too_many_tiles(variant):
+    m = _model(base="sphere", tile="thorn", tiles_u=16, tiles_v=8, mode="maps", map_resolution=64)
+    r = m.memory_report()
+    assert r["maps_bytes"] == 64 * 64 * 25
+    assert r["tile_bytes"] == m.tiles[0].vertex_count * 48 + m.tiles[0].face_count * 12
+    assert r["mesh_bytes"] == m.vertex_count * 32 + m.face_count * 12
+    assert r["hddm_bytes"] == r["tile_bytes"] + r["maps_bytes"] + 128 * 8
+    with pytest.raises(ValueError, match="tiles_u"):
+        DDMModel(DDMConfig(base="sphere", tile="thorn", tiles_u=200000, tiles_v=100000))
+
+
+def test_metamorphosis_follows_eq3_and_extrapolates(variant):
+    m = _model(base="plane", tile="thorn", tile_target="flower", tiles_u=2, tiles_v=2,
+               height=0.5, mode="exact", animation=Animation(alpha0=0.0, alpha_rate=1.0))
+    a, b = m.tiles[0].positions, m.target.positions
+    for t in (0.0, 1.0, 2.0, -0.5):
+        p, n, _, _ = m.tile_buffers_at(t)
+        assert np.allclose(_np(p), a * (1 - t) + b * t, atol=1e-5)
+        assert np.allclose(np.linalg.norm(_np(n), axis=1), 1, atol=1e-5)
+    p, _, _ = m.map(t=2.0)
+    assert np.all(np.isfinite(_np(p)))
+    with pytest.raises(ValueError, match="compatible"):
+        DDMModel(DDMConfig(base="plane", tile="thorn", tile_target="chain"))
+
+
+def test_texture_space_animation_translates_tiles(variant):
+    anim = Animation(velocity_u=0.5, rotation_rate=0.0, w_amplitude=0.5, w_frequency=0.25)
+    m = _model(base="plane", tile="hexagon", tiles_u=4, tiles_v=4, height=0.1, mode="exact",
+               animation=anim)
+    p0, _, uv0 = m.map(t=0.0)
+    p1, _, uv1 = m.map(t=1.0)
+    du = _np(uv1) - _np(uv0)
+    assert np.allclose(du[:, 0], 0.5 * m.layout.size[0], atol=1e-6) and np.allclose(du[:, 1], 0)
+    z = np.tile(m.tiles[0].positions[:, 2], m.layout.count)
+    assert np.allclose(_np(p1)[:, 2], 0.1 * 1.5 * z, atol=1e-5)   # sin(2 pi 0.25) = 1
