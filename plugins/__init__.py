@@ -15,6 +15,10 @@ PLUGIN_MODULES = [
     "mi_displace.plugins.displaced",
     "mi_displace.plugins.raster",
     "mi_displace.plugins.ddm",
+    "mi_displace.plugins.vdm",
+    "mi_displace.plugins.vdm_mesh",
+    "mi_displace.plugins.horizon",
+    "mi_displace.plugins.relief",
 ]
 
 _registered_for: str | None = None

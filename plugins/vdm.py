@@ -98,11 +98,15 @@ def parse_mesostructure(props: mi.Properties, plugin: str):
 class MesostructureBSDF(mi.BSDF):
     """Base of the per-pixel mesostructure BSDFs: flags, nested BSDF plumbing.
 
-    Subclasses implement ``_prepare(si, active) -> (state, blocked, si_shading)`` and
-    ``_lit(state, wo_world) -> mi.Bool``.
+    Subclasses implement ``_setup(tile_size, meshes)`` (precomputation once the tile size is
+    known: at construction when ``tile_size`` is given, else when a ``vdm_mesh`` attaches),
+    ``_prepare(si, active) -> (state, blocked, si_shading)`` and
+    ``_lit(state, wo_world) -> mi.Bool``.  ``HAS_SILHOUETTE = False`` techniques never pass
+    rays through (no null transmission, no march inside the raster alpha test).
     """
 
     PLUGIN = "mesostructure"
+    HAS_SILHOUETTE = False
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
@@ -118,12 +122,48 @@ class MesostructureBSDF(mi.BSDF):
             flags |= int(c)
         self.m_flags = flags | int(mi.BSDFFlags.SpatiallyVarying)
 
+        self.stats: dict = {}
+        self._meshes: list[dict] = []
+
+    def attach(self, mesh_info: dict) -> None:
+        """Called by ``vdm_mesh``: measured tile size and per-vertex principal curvatures.
+
+        Args:
+            mesh_info: ``tile_size`` [world], ``tile_spread`` (relative), ``c_max``, ``c_min``
+                (V,) [1 / world units], ``name``.
+        """
+        self._meshes.append(mesh_info)
+        tile = self.tile_size if self.tile_size is not None else float(
+            np.mean([m["tile_size"] for m in self._meshes]))
+        self._setup(tile, self._meshes)
+        spread = max(m["tile_spread"] for m in self._meshes)
+        self.stats["tile_spread"] = spread
+        if spread > 0.25:
+            mi.Log(mi.LogLevel.Warn,
+                   f"{self.PLUGIN}: the texture tile's world size varies by {100 * spread:.0f}% "
+                   f"over mesh {mesh_info.get('name')!r} (UV scale mismatch): the table assumes "
+                   f"one tile size ({tile:.4g}); expect stretched relief there")
+
+    def _require(self, ready: bool) -> None:
+        if not ready:
+            raise RuntimeError(
+                f"{self.PLUGIN}: BSDF {self.id()!r} is not set up: put it inside a "
+                "<shape type=\"vdm_mesh\"> (tile size and curvature measured there) or give "
+                "'tile_size' [world units of one texture tile]")
+
     # -- to implement --------------------------------------------------------------------
+    def _setup(self, tile_size: float, meshes) -> None:
+        raise NotImplementedError
+
     def _prepare(self, si, active):
         raise NotImplementedError
 
     def _lit(self, state, wo_world):
         raise NotImplementedError
+
+    def _blocked(self, si, active) -> mi.Bool:
+        """Where the ray passes through (only for HAS_SILHOUETTE techniques)."""
+        return active & self._prepare(si, active)[1]
 
     # -- mi.BSDF -------------------------------------------------------------------------
     def eval(self, ctx, si, wo, active=True):
@@ -169,8 +209,9 @@ class MesostructureBSDF(mi.BSDF):
 
     def eval_null_transmission(self, si, active=True):
         active = mi.Bool(active)
-        _, blocked, _ = self._prepare(si, active)
-        return mi.Spectrum(dr.select(active & blocked, 1.0, 0.0))
+        if not self.HAS_SILHOUETTE:
+            return dr.zeros(mi.Spectrum, dr.width(si.uv))
+        return mi.Spectrum(dr.select(self._blocked(si, active), 1.0, 0.0))
 
     def eval_diffuse_reflectance(self, si, active=True):
         active = mi.Bool(active)
@@ -186,6 +227,7 @@ class VDM(MesostructureBSDF):
     """View-dependent displacement mapping (paper §3)."""
 
     PLUGIN = "vdm"
+    HAS_SILHOUETTE = True
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
@@ -212,32 +254,16 @@ class VDM(MesostructureBSDF):
                 raise ValueError(f"vdm: 'curvature_min' ({lo}) > 'curvature_max' ({hi})")
             self.fixed_range = (lo, hi)
         self.steps = None
-        self.stats: dict = {}
-        self._meshes: list[dict] = []
         if self.tile_size is not None:  # standalone use: flat table (c_V = 0) now
-            self._build(self.tile_size, None, False)
+            self._setup(self.tile_size, None)
 
     # -- table -----------------------------------------------------------------------------
-    def attach(self, mesh_info: dict) -> None:
-        """Called by ``vdm_mesh``: measured tile size and per-vertex principal curvatures.
-
-        Args:
-            mesh_info: ``tile_size`` [world], ``tile_spread`` (relative), ``c_max``, ``c_min``
-                (V,) [1 / world units], ``name``.
-        """
-        self._meshes.append(mesh_info)
-        tile = self.tile_size if self.tile_size is not None else float(
-            np.mean([m["tile_size"] for m in self._meshes]))
-        c_max = np.concatenate([m["c_max"] for m in self._meshes])
-        c_min = np.concatenate([m["c_min"] for m in self._meshes])
-        self._build(tile, (c_min, c_max), True)
-        spread = max(m["tile_spread"] for m in self._meshes)
-        self.stats["tile_spread"] = spread
-        if spread > 0.25:
-            mi.Log(mi.LogLevel.Warn,
-                   f"vdm: the texture tile's world size varies by {100 * spread:.0f}% over "
-                   f"mesh {mesh_info.get('name')!r} (UV scale mismatch): the table assumes "
-                   f"one tile size ({tile:.4g}); expect stretched relief there")
+    def _setup(self, tile_size: float, meshes) -> None:
+        curvatures = None
+        if meshes:
+            curvatures = (np.concatenate([m["c_min"] for m in meshes]),
+                          np.concatenate([m["c_max"] for m in meshes]))
+        self._build(tile_size, curvatures, bool(meshes))
 
     def _build(self, tile_size: float, curvatures, use_curvature: bool) -> None:
         lo = hi = 0.0
@@ -272,15 +298,16 @@ class VDM(MesostructureBSDF):
                           table_bytes=self.data.table_bytes(), compressed_bytes=lookup.nbytes)
 
     def _prepare(self, si, active):
-        if self.steps is None:
-            raise RuntimeError(
-                f"vdm: BSDF {self.id()!r} has no table: put it inside a <shape type=\"vdm_mesh\"> "
-                "(curvature and tile size measured there) or give 'tile_size' for flat use")
+        self._require(self.steps is not None)
         fp = self.steps.footprint(si, active)
         return fp, fp.silhouette, self.steps.shading(si, fp)
 
     def _lit(self, state, wo_world):
         return self.steps.lit(state, wo_world)
+
+    def _blocked(self, si, active):
+        self._require(self.steps is not None)
+        return self.steps.silhouette(si, active)
 
     def to_string(self):
         s = self.spec

@@ -14,6 +14,31 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from mi_displace.core.texture_height import height_function
+
+
+class TiledHeight:
+    """H(T) and dH/dT at tile coordinates T: the texture at uv = T / tiling."""
+
+    def __init__(self, texture: mi.Texture, tiling, fd_step_tiles: float):
+        self.tiling = (float(tiling[0]), float(tiling[1]))
+        self.texture = texture
+        self._fn = height_function(texture, fd_step_tiles / max(self.tiling))
+
+    def uv(self, T: mi.Point2f) -> mi.Point2f:
+        return mi.Point2f(T.x / self.tiling[0], T.y / self.tiling[1])
+
+    def __call__(self, T: mi.Point2f):
+        """(H, dH/dT): unitless height in [0, 1] and its gradient per tile unit."""
+        h, g = self._fn(self.uv(T))
+        return h, mi.Vector2f(g.x / self.tiling[0], g.y / self.tiling[1])
+
+    def value(self, T: mi.Point2f) -> mi.Float:
+        """H only (no gradient)."""
+        si = dr.zeros(mi.SurfaceInteraction3f, dr.width(T))
+        si.uv = self.uv(T)
+        return self.texture.eval_1(si)
+
 
 class TileFrame:
     """Per-lane tile frame at ``si`` (Dr.Jit, one entry per lane).

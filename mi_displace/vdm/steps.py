@@ -25,8 +25,7 @@ from dataclasses import dataclass
 import drjit as dr
 import mitsuba as mi
 
-from mi_displace.core.texture_height import height_function
-from mi_displace.vdm.frame import TileFrame, shading_interaction
+from mi_displace.vdm.frame import TiledHeight, TileFrame, shading_interaction
 from mi_displace.vdm.lookup import VDMLookup
 
 KDIAG, KOFF = "vertex_vdm_kdiag", "vertex_vdm_koff"
@@ -83,19 +82,14 @@ class VDMSteps:
                  shadow_slack: float = 1.0):
         self.lookup, self.depth, self.tile_size = lookup, float(depth), float(tile_size)
         self.tiling = (float(tiling[0]), float(tiling[1]))
-        self.height = height_function(height, 0.25 / (lookup.res * max(self.tiling)))
+        self.height = TiledHeight(height, self.tiling, 0.25 / lookup.res)
         self.use_curvature, self.shadows = use_curvature, shadows
         self.eps = float(shadow_bias) / lookup.res
         self.rel = float(shadow_slack) * (math.pi / 2) / lookup.n_theta
         self.tan_max = math.tan(lookup.theta_max)
 
-    def _height(self, T: mi.Point2f):
-        """(H, dH/dT) at tile coordinate T."""
-        h, g = self.height(mi.Point2f(T.x / self.tiling[0], T.y / self.tiling[1]))
-        return h, mi.Vector2f(g.x / self.tiling[0], g.y / self.tiling[1])
-
-    def footprint(self, si: mi.SurfaceInteraction3f, active: mi.Bool) -> Footprint:
-        """Steps 1 and 2 (and the shading normal of step 4) for the view si.wi."""
+    def _view(self, si: mi.SurfaceInteraction3f, active: mi.Bool):
+        """Tile frame, theta_V, phi_V, tile step of V, c_V [1/tile units] and T."""
         frame = TileFrame(si, self.tiling)
         v = si.to_world(si.wi)
         _, theta, phi, step = frame.direction(v)
@@ -104,10 +98,20 @@ class VDMSteps:
         else:
             c = dr.zeros(mi.Float, dr.width(theta))
         T = mi.Point2f(si.uv.x * self.tiling[0], si.uv.y * self.tiling[1])
+        return frame, theta, phi, step, c, T
+
+    def silhouette(self, si: mi.SurfaceInteraction3f, active: mi.Bool) -> mi.Bool:
+        """Step 1 alone (the raster alpha test needs nothing else)."""
+        _, theta, phi, _, c, T = self._view(si, active)
+        return active & (theta > self.lookup.mvm(T, phi, c))
+
+    def footprint(self, si: mi.SurfaceInteraction3f, active: mi.Bool) -> Footprint:
+        """Steps 1 and 2 (and the shading normal of step 4) for the view si.wi."""
+        frame, theta, phi, step, c, T = self._view(si, active)
         silhouette = active & (theta > self.lookup.mvm(T, phi, c))        # step 1
         l = self.lookup.d(T, theta, phi, c) * dr.sin(theta)                # step 2
         T2 = T - l * self.tile_size * step
-        H, grad = self._height(T2)
+        H, grad = self.height(T2)
         normal = frame.meso_normal(grad, self.depth * self.tile_size)
         uv = mi.Point2f(T2.x / self.tiling[0], T2.y / self.tiling[1])
         return Footprint(silhouette, uv, T2, self.depth * (1.0 - H), normal, frame.a, frame)

@@ -1,0 +1,87 @@
+"""Parallax occlusion / relief mapping (Policarpo et al. 2005): a per-pixel march in the
+height field with no precomputed table.
+
+From the reference point P (tile coordinate T, z = 0) the view ray descends as
+``z(s) = -s cos(theta_V)``, ``T(s) = T - s sin(theta_V) u_V`` (tile units, u_V the unit
+tile-space azimuth).  A linear search in ``steps`` equal depth slices over [0, D] finds the
+first slice below the surface ``-D (1 - H(T(s)))``; ``refine`` bisection steps then locate
+the intersection P'.  Self-shadows: a second linear march from P' towards L reports a
+shadow if any sample lies below the surface.  The reference surface is treated as flat and
+infinite: no curvature, hence no silhouettes (the known limitation of the method).
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from mi_displace.vdm.frame import TiledHeight
+
+#: Smallest cos(theta) used for the march (the ray length D / cos theta is bounded).
+MIN_COS = 0.02
+
+
+def march_view(height: TiledHeight, T: mi.Point2f, cos_t: mi.Float, dir_T: mi.Vector2f,
+               D: float, steps: int, refine: int) -> tuple[mi.Point2f, mi.Float]:
+    """Intersection of the view ray with the height field.
+
+    Args:
+        T: tile coordinate of P; cos_t: cos(theta_V); dir_T: tile-space unit direction of
+            the view's tangential part (towards the viewer); D: depth [tile units].
+
+    Returns:
+        (T', h): tile coordinate and depth [tile units] of P'.
+    """
+    cos_t = dr.maximum(cos_t, MIN_COS)
+    tan_t = dr.sqrt(dr.maximum(1.0 - cos_t * cos_t, 0.0)) / cos_t
+    dz = D / steps
+
+    def at(depth):
+        return mi.Point2f(T.x - depth * tan_t * dir_T.x, T.y - depth * tan_t * dir_T.y)
+
+    def below(depth):
+        return depth >= D * (1.0 - height.value(at(depth)))
+
+    def lin_body(i, lo, hi, found):
+        depth = mi.Float(i + 1) * dz
+        hit = ~found & below(depth)
+        hi = dr.select(hit, depth, hi)
+        lo = dr.select(~found & ~hit, depth, lo)
+        return i + 1, lo, hi, found | hit
+
+    n = dr.width(cos_t)
+    _, lo, hi, _ = dr.while_loop(
+        state=(mi.UInt32(0), dr.zeros(mi.Float, n), dr.full(mi.Float, D, n), dr.zeros(mi.Bool, n)),
+        cond=lambda i, lo, hi, found: i < steps, body=lin_body,
+        labels=("i", "lo", "hi", "found"), label="relief_linear")
+
+    def bis_body(i, lo, hi):
+        mid = 0.5 * (lo + hi)
+        b = below(mid)
+        return i + 1, dr.select(b, lo, mid), dr.select(b, mid, hi)
+
+    _, lo, hi = dr.while_loop(state=(mi.UInt32(0), lo, hi),
+                              cond=lambda i, lo, hi: i < refine, body=bis_body,
+                              labels=("i", "lo", "hi"), label="relief_bisect")
+    depth = 0.5 * (lo + hi)
+    return at(depth), depth
+
+
+def march_shadow(height: TiledHeight, T: mi.Point2f, h: mi.Float, cos_l: mi.Float,
+                 dir_T: mi.Vector2f, D: float, steps: int) -> mi.Bool:
+    """True where the segment from P' (depth h) up to the reference surface towards L
+    passes below the height field (self-shadow)."""
+    cos_l = dr.maximum(cos_l, MIN_COS)
+    tan_l = dr.sqrt(dr.maximum(1.0 - cos_l * cos_l, 0.0)) / cos_l
+    eps = 0.5 * D / steps
+
+    def body(i, shadow):
+        depth = h * (1.0 - mi.Float(i + 1) / (steps + 1))
+        rise = h - depth
+        Ts = mi.Point2f(T.x + rise * tan_l * dir_T.x, T.y + rise * tan_l * dir_T.y)
+        shadow |= depth > D * (1.0 - height.value(Ts)) + eps
+        return i + 1, shadow
+
+    _, shadow = dr.while_loop(state=(mi.UInt32(0), dr.zeros(mi.Bool, dr.width(h))),
+                              cond=lambda i, s: i < steps, body=body,
+                              labels=("i", "shadow"), label="relief_shadow")
+    return shadow
