@@ -77,7 +77,8 @@ class MeshBase(BaseSurface):
         e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
         length = np.linalg.norm(pos[e[:, 0]] - pos[e[:, 1]], axis=1)
         turn = np.linalg.norm(nrm[e[:, 0]] - nrm[e[:, 1]], axis=1)
-        self._kappa = float(np.max(turn[length > 0] / length[length > 0]))
+        self.edge_kappa = turn[length > 0] / length[length > 0]   # [1 / object units]
+        self._kappa = float(np.max(self.edge_kappa))
         ext = pos.max(0) - pos.min(0)
         self._extent = (float(np.linalg.norm(ext)), float(np.linalg.norm(ext)))
         self.clamp_resolution = int(clamp_resolution)

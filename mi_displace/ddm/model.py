@@ -178,9 +178,13 @@ class DDMModel:
         k_lo, k_hi = self.base.curvature_bounds()
         kappa = max(abs(k_lo), abs(k_hi))
         if kappa > 0 and w_max * kappa >= 1:
+            where = ""
+            edge_kappa = getattr(self.base, "edge_kappa", None)
+            if edge_kappa is not None:
+                where = f" (on {int(np.sum(edge_kappa * w_max >= 1)):,} of {len(edge_kappa):,} mesh edges)"
             warnings.warn(f"ddm: w up to {w_max:.4g} exceeds the base's smallest radius of "
-                          f"curvature {1 / kappa:.4g}: T(u, v, w) folds there (tiles turn "
-                          "inside out; output stays finite)", FoldingWarning, stacklevel=3)
+                          f"curvature {1 / kappa:.4g}{where}: T(u, v, w) folds there (tiles "
+                          "turn inside out; output stays finite)", FoldingWarning, stacklevel=3)
 
     def tile_buffers_at(self, t: float):
         """The tile arrays at time t: the metamorphosed tile (eq. 3) or the stored ones."""
