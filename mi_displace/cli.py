@@ -40,6 +40,7 @@ SUMMARY_COLUMNS = (
 # Modules contributing sub-commands (see the module docstring).
 COMMAND_MODULES = [
     "mi_displace.ddm.cli",
+    "mi_displace.bake.cli",
 ]
 
 

@@ -1,0 +1,361 @@
+"""The baker (§3): displacement and normal maps of a high-poly over a low-poly.
+
+Pipeline (every per-texel step is Dr.Jit; see each module):
+
+1. inputs — load both meshes; no low-poly: :func:`unwrap.make_low_poly`; no UVs:
+   :func:`unwrap.unwrap` (xatlas), both noted in ``bake.json``;
+2. :class:`trace.HighPoly` builds Mitsuba's acceleration structure over the high-poly (the
+   paper's clipping tree, §3.3) and :class:`uv_raster.UVLayout` the flat UV layout;
+3. per block of texel rows (at most :data:`CHUNK_SAMPLES` samples, §4 "render them in parts
+   and then assemble"): :func:`uv_raster.rasterize_rows` -> :func:`trace.trace` ->
+   per-texel averages of the aa x aa samples (scatter-add);
+4. edge padding (:mod:`padding`), maps in every requested format (:mod:`formats`), the
+   diagnostics image (:mod:`diagnostics`) and ``bake.json``.
+
+Units: distances in the meshes' object units; resolutions in texels.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mi_displace.bake import diagnostics, formats, padding, unwrap
+from mi_displace.bake.meshdata import (MeshData, load_mesh, save_obj, tangent_frame,
+                                       uv_triangle_stats)
+from mi_displace.bake.trace import AMBIGUOUS, EMPTY, HighPoly, LowPolyDevice, OK, trace
+from mi_displace.bake.uv_raster import (OVERLAP_RESOLUTION, UVLayout, overlap_texels,
+                                        rasterize_rows)
+from mi_displace.core.tessellate import scatter_add
+
+CHUNK_SAMPLES = 1 << 22        # samples per block of rows (bounds device memory)
+BYTES_PER_TEXEL = 160          # host: maps, status, padding transform and encoded copies
+BYTES_PER_SAMPLE = 240         # device: samples, rays, intersections, interpolated frame
+MAX_RESOLUTION = 16384
+DEFAULT_MAX_DISTANCE_REL = 0.1  # of the high-poly's bounding-box diagonal
+DEFAULT_DELTA_REL = 1e-5
+
+
+def available_memory() -> int:
+    """Bytes of memory available to this process (MemAvailable of /proc/meminfo)."""
+    env = os.environ.get("MI_DISPLACE_BAKE_MEMORY")
+    if env:
+        return int(float(env))
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 8 << 30
+
+
+def memory_estimate(width: int, height: int, aa: int) -> int:
+    """Peak bytes of a bake: host maps plus one block of device samples."""
+    samples = min(width * height * aa * aa, max(CHUNK_SAMPLES, width * aa * aa))
+    return width * height * BYTES_PER_TEXEL + samples * BYTES_PER_SAMPLE
+
+
+def check_settings(res, aa, max_distance, pad, memory: int | None = None) -> tuple[int, int]:
+    """Validate the numeric settings before any kernel runs; returns (width, height)."""
+    if isinstance(res, (tuple, list)):
+        width, height = res
+    else:
+        width = height = res
+    for name, v in (("res", width), ("res", height), ("aa", aa)):
+        if isinstance(v, bool) or int(v) != v or v < 1:
+            raise ValueError(f"{name}: must be a positive integer, got {v!r}")
+    width, height = int(width), int(height)
+    if max(width, height) > MAX_RESOLUTION or width * height * aa * aa >= 2**31:
+        raise ValueError(f"res: {width}x{height} with aa {aa} exceeds the limit "
+                         f"({MAX_RESOLUTION} texels a side, 2^31 samples)")
+    if max_distance is not None and not (math.isfinite(max_distance) and max_distance > 0):
+        raise ValueError(f"max_distance: must be a positive finite distance, got {max_distance!r}")
+    if not pad >= 0:
+        raise ValueError(f"padding: must be >= 0 texels, got {pad!r}")
+    need = memory_estimate(width, height, aa)
+    have = available_memory() if memory is None else memory
+    if need > 0.8 * have:
+        raise ValueError(f"res: a {width}x{height} bake with aa {aa} needs about "
+                         f"{need / 2**30:.1f} GiB but only {have / 2**30:.1f} GiB is available; "
+                         "lower 'res' or 'aa'")
+    return width, height
+
+
+@dataclass
+class BakeResult:
+    """Maps (NumPy, float32, row 0 = top = v 1) and everything ``bake.json`` records."""
+
+    maps: dict
+    status: np.ndarray
+    covered: np.ndarray
+    low: MeshData
+    record: dict = field(default_factory=dict)
+
+
+def prepare_inputs(high, low=None, target_faces: int = 5000, smoothing_iterations: int = 10,
+                   unwrap_resolution: int = 1024) -> tuple[MeshData, MeshData, dict]:
+    """Load (paths) or check (MeshData) both meshes; simplify / unwrap where needed."""
+    timings = {}
+    start = time.perf_counter()
+    high = high if isinstance(high, MeshData) else load_mesh(high, "high-poly")
+    if low is not None and not isinstance(low, MeshData):
+        low = load_mesh(low, "low-poly")
+    timings["load_s"] = time.perf_counter() - start
+    if low is None:
+        start = time.perf_counter()
+        low = unwrap.make_low_poly(high, target_faces, smoothing_iterations)
+        timings["simplify_s"] = time.perf_counter() - start
+    if low.uvs is None:
+        start = time.perf_counter()
+        low = unwrap.unwrap(low, resolution=unwrap_resolution)
+        timings["unwrap_s"] = time.perf_counter() - start
+    lo, hi = low.positions.min(0), low.positions.max(0)
+    hlo, hhi = high.positions.min(0), high.positions.max(0)
+    gap = np.maximum(np.maximum(lo - hhi, hlo - hi), 0.0)
+    if np.linalg.norm(gap) > 0.05 * high.diagonal or not (0.1 < low.diagonal / high.diagonal < 10):
+        raise ValueError(
+            f"low-poly does not sit near the high-poly: bounding boxes {lo.tolist()}..{hi.tolist()} "
+            f"and {hlo.tolist()}..{hhi.tolist()} (gap {float(np.linalg.norm(gap)):.3g}, diagonals "
+            f"{low.diagonal:.3g} vs {high.diagonal:.3g}); align the meshes (same units and frame)")
+    return high, low, timings
+
+
+class Baker:
+    """Device state of one high/low pair: acceleration structures and the low-poly frame.
+
+    Building it is the "acceleration structure" part of a bake's time; :meth:`run` can be
+    called many times (other resolutions, aa, max_distance) on the same state.
+    """
+
+    def __init__(self, high: MeshData, low: MeshData, cage=None, cage_offset: float | None = None):
+        normals = low.normals()
+        tangents, signs = tangent_frame(low.positions, low.faces, low.uvs, normals)
+        cage_pos = None
+        if cage is not None:
+            cage = cage if isinstance(cage, MeshData) else load_mesh(cage, "cage")
+            if cage.positions.shape != low.positions.shape or not np.array_equal(
+                    cage.faces, low.faces):
+                raise ValueError(f"cage: must have the low-poly's vertices and faces "
+                                 f"({len(low.positions)} vertices, {len(low.faces)} faces), got "
+                                 f"{len(cage.positions)} and {len(cage.faces)}")
+            cage_pos = cage.positions
+        elif cage_offset is not None:
+            if not (math.isfinite(cage_offset) and cage_offset > 0):
+                raise ValueError(f"cage_offset: must be a positive distance, got {cage_offset!r}")
+            cage_pos = low.positions + cage_offset * normals
+        self.high, self.low = high, low
+        self.high_dev = HighPoly(high)
+        self.layout = UVLayout(low)
+        self.low_dev = LowPolyDevice(low, normals, tangents, signs, cage_pos)
+        self.cage_mode = cage_pos is not None
+
+    #: channels of the interleaved (H, W, C) result: name -> (first channel, count)
+    CHANNELS = {"displacement": (0, 1), "normal_tangent": (1, 3), "normal_object": (4, 3),
+                "direction_tangent": (7, 3), "status": (10, 1), "back_depth": (11, 1)}
+
+    def run(self, width: int, height: int, aa: int, max_distance: float, delta: float,
+            dual_depth: bool, conservative: bool = True) -> tuple[np.ndarray, dict]:
+        """Bake all texels.
+
+        Returns:
+            (H, W, C) float32 image with the channels :data:`CHANNELS` (C = 11, or 12 with
+            the dual-depth back depth; status as a float code), and counts.
+        """
+        H, W = height, width
+        C = 12 if dual_depth else 11
+        out = np.empty((H, W, C), np.float32)
+        conservative_samples = 0
+        tri_hit = dr.zeros(mi.UInt32, self.layout.face_count)
+        rows = max(1, CHUNK_SAMPLES // (W * aa * aa))
+        for row0 in range(0, H, rows):  # blocks of rows (bounded memory), not per texel
+            n_rows = min(rows, H - row0)
+            s = rasterize_rows(self.layout, W, H, row0, n_rows, aa, conservative)
+            conservative_samples += s.conservative
+            dr.scatter(tri_hit, 1, s.prim)
+            r = trace(self.high_dev, self.low_dev, s.prim, s.b1, s.b2, max_distance, delta, dual_depth)
+            block = _texel_average(r, s.texel, n_rows * W, aa, max_distance, C)
+            out[row0:row0 + n_rows] = block.reshape(n_rows, W, C)
+        ores = min(max(width, height), OVERLAP_RESOLUTION)
+        extra = {"uv_overlap_texels": overlap_texels(self.layout, ores),
+                 "uv_overlap_resolution": ores, "conservative_samples": conservative_samples,
+                 "triangles_without_texels": int(self.layout.face_count
+                                                 - np.count_nonzero(np.asarray(tri_hit)))}
+        return out, extra
+
+
+def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, C: int):
+    """Per-texel mean of the samples that hit (Dr.Jit), interleaved into one (n_tex * C) buffer.
+
+    Only ``ok`` and ``ambiguous`` samples carry values (a back-facing hit is never measured).
+    Texels without one keep displacement 0, the low-poly normal and the tangent-space z axis
+    until padding fills them from their nearest texel with a value; their status is the worst
+    of their samples.
+    """
+    hit = (r.status == OK) | (r.status == AMBIGUOUS)
+    values = [r.displacement, *r.normal_tangent, *r.normal_object, *r.direction_tangent]
+    if r.back_depth is not None:
+        values.append(r.back_depth)
+    st = dr.zeros(mi.UInt32, n_tex)
+    dr.scatter_reduce(dr.ReduceOp.Max, st, r.status, texel)
+    fallback = [dr.zeros(mi.Float, n_tex) for _ in range(3)]
+    for k in range(3):  # the low-poly normal (what misses carry) of any sample of the texel
+        dr.scatter(fallback[k], r.normal_object[k], texel)
+    if aa == 1:  # one sample per texel: plain scatter
+        cnt = dr.zeros(mi.Float, n_tex)
+        dr.scatter(cnt, dr.select(hit, 1.0, 0.0), texel)
+        sums = [dr.zeros(mi.Float, n_tex) for _ in values]
+        for buf, v in zip(sums, values):
+            dr.scatter(buf, v, texel, hit)
+    else:
+        w = dr.select(hit, 1.0, 0.0)
+        cnt = dr.zeros(mi.Float, n_tex)
+        dr.scatter_add(cnt, w, texel)
+        sums = [dr.zeros(mi.Float, n_tex) for _ in values]
+        for buf, v in zip(sums, values):
+            dr.scatter_add(buf, v, texel, hit)
+    has = cnt > 0
+    inv = dr.select(has, dr.rcp(cnt), 0.0)
+    z = mi.Vector3f(0, 0, 1)
+    nt = dr.normalize(dr.select(has, mi.Vector3f(*sums[1:4]), z))
+    no = dr.select(has, mi.Vector3f(*sums[4:7]), mi.Vector3f(*fallback))
+    no = dr.normalize(dr.select(dr.squared_norm(no) > 0, no, z))  # empty texels: +z
+    dirn = dr.normalize(dr.select(has, mi.Vector3f(*sums[7:10]), z))
+    channels = [sums[0] * inv, *nt, *no, *dirn, mi.Float(st)]
+    if r.back_depth is not None:
+        channels.append(dr.select(has, sums[10] * inv, -max_distance))
+    flat = dr.empty(mi.Float, n_tex * C)
+    base = dr.arange(mi.UInt32, n_tex) * C
+    for c, v in enumerate(channels):
+        dr.scatter(flat, v, base + c)
+    dr.eval(flat)
+    return np.asarray(flat)
+
+
+def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: float | None = None,
+         pad: float = 8, map_formats=formats.DEFAULT_FORMATS, diagnostics_image: bool = False,
+         cage=None, cage_offset: float | None = None, target_faces: int = 5000,
+         smoothing_iterations: int = 10, conservative: bool = True,
+         min_hit_fraction: float = 0.5, delta: float | None = None) -> BakeResult:
+    """Bake maps of ``high`` over ``low`` (paths or :class:`MeshData`).
+
+    Args:
+        high: the original (detailed) mesh.
+        low: the simplified mesh; ``None`` makes one (smoothing + fast-simplification to
+            ``target_faces`` after ``smoothing_iterations`` Taubin passes); without UVs it is
+            unwrapped with xatlas.
+        res: map size in texels (int, or (width, height)).
+        out_dir: folder for maps, sidecars, ``low.obj`` and ``bake.json`` (``None``: no files).
+        aa: sub-samples per texel side (aa x aa regular grid; 1 = texel centre).
+        max_distance: largest |displacement| searched [object units]; default 10 % of the
+            high-poly's bounding-box diagonal.
+        pad: edge padding radius [texels]; texels that missed the high-poly are filled
+            from their nearest hit texel within the same radius.
+        map_formats: names from :data:`formats.FORMATS`.
+        diagnostics_image: also write ``diagnostics.png`` (status colours).
+        cage / cage_offset: cage mesh (the low-poly's topology) or an offset along the
+            vertex normals [object units]; rays then run from the cage through the low-poly.
+        min_hit_fraction: fewest covered texels that must find the high-poly; below it the
+            low-poly is taken not to sit near the high-poly (ValueError, no empty map).
+        delta: ray start offset [object units]; default 1e-5 of the diagonal.
+    """
+    t0 = time.perf_counter()
+    map_formats = formats.check_formats(map_formats)
+    width, height = check_settings(res, aa, max_distance, pad)
+    high, low, timings = prepare_inputs(high, low, target_faces, smoothing_iterations)
+    max_distance = DEFAULT_MAX_DISTANCE_REL * high.diagonal if max_distance is None else float(max_distance)
+    delta = DEFAULT_DELTA_REL * high.diagonal if delta is None else float(delta)
+    uv_stats = uv_triangle_stats(low.uvs, low.faces)
+    start = time.perf_counter()
+    baker = Baker(high, low, cage, cage_offset)
+    dr.eval()
+    timings["accel_s"] = time.perf_counter() - start
+    start = time.perf_counter()
+    image, extra = baker.run(width, height, aa, max_distance, delta,
+                             "dual_d8_n16" in map_formats, conservative)
+    timings["raster_trace_s"] = time.perf_counter() - start
+    status = image[..., Baker.CHANNELS["status"][0]].astype(np.uint8)
+    covered = status != EMPTY
+    start = time.perf_counter()
+    # texels that found the high-poly feed the padding; misses inside charts are filled too
+    found = (status == OK) | (status == AMBIGUOUS)
+    image, filled = padding.pad(image, found, pad)
+    filled |= covered
+    # validity: 1 where the high-poly was measured; padded outward from the charts only, so
+    # misses inside a chart (holes of the high-poly) stay 0 and restoration keeps them open
+    valid, _ = padding.pad(found.astype(np.float32), covered, pad)
+    timings["padding_s"] = time.perf_counter() - start
+    maps = split_channels(image)
+    maps["valid"] = valid
+    timings["bake_s"] = timings["accel_s"] + timings["raster_trace_s"] + timings["padding_s"]
+    count = diagnostics.counts(status)
+    n_cov = int(covered.sum())
+    hits = count["ok"] + count["ambiguous"]
+    if uv_stats["uv_degenerate_triangles"] or extra["uv_overlap_texels"]:
+        warnings.warn(f"low-poly UVs: {uv_stats['uv_degenerate_triangles']} degenerate triangles, "
+                      f"{extra['uv_overlap_texels']} texels covered by overlapping triangles "
+                      "(texture mapping not unambiguous, §3.1)", stacklevel=2)
+    if n_cov == 0 or hits < min_hit_fraction * n_cov:
+        raise ValueError(
+            f"low-poly does not sit near the high-poly: only {hits} of {n_cov} covered texels "
+            f"reached it within max_distance={max_distance:.4g} (misses {count['miss']}, beyond "
+            f"{count['beyond']}); align the meshes or raise max_distance")
+    record = {
+        "high": {"name": high.name, "vertices": len(high.positions), "faces": len(high.faces),
+                 "diagonal": high.diagonal},
+        "low": {"name": low.name, "vertices": len(low.positions), "faces": len(low.faces),
+                "notes": low.notes, **uv_stats},
+        "settings": {"width": width, "height": height, "aa": aa, "max_distance": max_distance,
+                     "delta": delta, "padding": pad, "formats": list(map_formats),
+                     "cage": None if cage is None else str(cage) if not isinstance(cage, MeshData) else cage.name,
+                     "cage_offset": cage_offset, "conservative": conservative,
+                     "variant": mi.variant()},
+        "counts": {**count, "covered": n_cov, "padded": int(filled.sum() - n_cov), **extra},
+        "displacement_range": [float(maps["displacement"][covered].min()) if n_cov else 0.0,
+                               float(maps["displacement"][covered].max()) if n_cov else 0.0],
+        "timings": timings,
+    }
+    result = BakeResult(maps, status, covered, low, record)
+    if out_dir is not None:
+        write_outputs(result, Path(out_dir), map_formats, diagnostics_image)
+    timings["total_s"] = time.perf_counter() - t0
+    if out_dir is not None:
+        (Path(out_dir) / "bake.json").write_text(json.dumps(record, indent=2))
+    return result
+
+
+def split_channels(image: np.ndarray) -> dict:
+    """Views of the interleaved bake image per map name (see :attr:`Baker.CHANNELS`)."""
+    maps = {}
+    for name, (c, n) in Baker.CHANNELS.items():
+        if name != "status" and c + n <= image.shape[2]:
+            maps[name] = image[..., c] if n == 1 else image[..., c:c + n]
+    return maps
+
+
+def write_outputs(result: BakeResult, out_dir: Path, map_formats, diagnostics_image: bool) -> None:
+    """Write ``low.obj``, every map with its sidecar, and the diagnostics image."""
+    start = time.perf_counter()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    low = result.low
+    save_obj(out_dir / "low.obj", low.positions, low.faces, low.uvs, low.normals())
+    meta = {"low": "low.obj", "max_distance": result.record["settings"]["max_distance"],
+            "aa": result.record["settings"]["aa"],
+            "cage": result.record["settings"]["cage"] or result.record["settings"]["cage_offset"]}
+    formats.write_png_raw(out_dir / "valid.png", (result.maps["valid"] > 0.5).astype(np.uint8) * 255)
+    meta["valid"] = "valid.png"
+    files = [str(formats.write_map(out_dir, f, result.maps, meta).name) for f in map_formats]
+    files.append("valid.png")
+    if diagnostics_image:
+        formats.write_png_raw(out_dir / "diagnostics.png", diagnostics.image(result.status))
+        files.append("diagnostics.png")
+    result.record["files"] = ["low.obj"] + files
+    result.record["timings"]["write_s"] = time.perf_counter() - start

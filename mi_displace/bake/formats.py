@@ -1,0 +1,257 @@
+"""Map formats of §1.2, each written with a JSON sidecar holding its scale/offset metadata.
+
+Every quantised displacement channel stores ``q = round((d - offset) / scale)``; reading
+gives back ``d = offset + scale * q`` [object units] exactly as written (the sidecar holds
+``scale`` and ``offset`` as Python floats).  Offset and scale span the baked range
+[d_min, d_max], so the full integer range is used.  Normals and directions are unit vectors
+in the low-poly's tangent frame (x = tangent, y = bitangent, z = normal;
+:mod:`mi_displace.bake.meshdata`) encoded as ``(x + 1) / 2``; two-component encodings restore
+``z = sqrt(1 - x^2 - y^2)`` (§1.2), valid because tangent-space z >= 0 on the outward side.
+PNG maps are *linear data* (no sRGB curve).
+
+========================  ======  =====================================================
+format (file)             pixel   channels
+========================  ======  =====================================================
+``d8`` (.png)             Y 8     displacement (along the interpolated normal)
+``d16`` (.png)            Y 16    displacement, 16 bit (the PNG-16 of Fig. 21's table)
+``dir24_d8`` (.png)       RGBA 8  RGB direction, A displacement
+``dir16_d16`` (.png)      RGBA 8  R,G direction x,y; B,A displacement high, low byte
+``d8_n24`` (.png)         RGBA 8  RGB normal, A displacement (Fig. 20)
+``dual_d8_n16`` (.png)    RGBA 8  R front depth, G back depth (dual-depth relief), B,A
+                                  normal x,y
+``d16_n16`` (.png)        RGBA 8  R,G displacement high, low byte; B,A normal x,y
+``float`` (.exr)          float   D displacement, NX NY NZ normal, DX DY DZ direction,
+                                  B back depth (all float32, ZIP)
+``normal_tangent`` (.png) RGB 8   tangent-space normal map (MikkTSpace-equivalent frame)
+``normal_object`` (.png)  RGB 8   object-space normal map
+========================  ======  =====================================================
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+FORMATS = {
+    "d8": ".png", "d16": ".png", "dir24_d8": ".png", "dir16_d16": ".png", "d8_n24": ".png",
+    "dual_d8_n16": ".png", "d16_n16": ".png", "float": ".exr",
+    "normal_tangent": ".png", "normal_object": ".png",
+}
+DEFAULT_FORMATS = tuple(FORMATS)
+UV_CONVENTION = "texel (c, r) centre at u = (c + 0.5) / W, v = 1 - (r + 0.5) / H (v up, row 0 on top)"
+TANGENT_CONVENTION = ("MikkTSpace-equivalent: vertex tangents from UV gradients, angle-weighted, "
+                      "orthogonalised to the vertex normal; bitangent = sign * cross(n, t) per pixel "
+                      "from the interpolated, unnormalised n and t; normal = normalize(x t + y b + z n)")
+
+
+def check_formats(formats) -> tuple[str, ...]:
+    """Validate a list of format names (ValueError naming the unknown ones)."""
+    formats = tuple(formats)
+    bad = [f for f in formats if f not in FORMATS]
+    if bad or not formats:
+        raise ValueError(f"formats: unknown {bad or 'empty list'}; choose from {', '.join(FORMATS)}")
+    return formats
+
+
+def _range(*arrays) -> tuple[float, float]:
+    lo = float(min(np.min(a) for a in arrays))
+    hi = float(max(np.max(a) for a in arrays))
+    return lo, (hi - lo if hi > lo else 1.0)
+
+
+def _quantise(d: np.ndarray, offset: float, span: float, bits: int) -> tuple[np.ndarray, float]:
+    levels = (1 << bits) - 1
+    scale = span / levels
+    q = np.clip(np.round((d.astype(np.float64) - offset) / scale), 0, levels)
+    return q.astype(np.uint16 if bits > 8 else np.uint8), scale
+
+
+def _unit8(v: np.ndarray) -> np.ndarray:
+    return np.clip(np.round((np.asarray(v, np.float64) * 0.5 + 0.5) * 255), 0, 255).astype(np.uint8)
+
+
+def _from8(q: np.ndarray) -> np.ndarray:
+    return q.astype(np.float32) / 255.0 * 2.0 - 1.0
+
+
+def _complete_z(xy: np.ndarray) -> np.ndarray:
+    z = np.sqrt(np.clip(1.0 - (xy ** 2).sum(-1, keepdims=True), 0.0, 1.0))
+    return _normalise(np.concatenate([xy, z], -1))
+
+
+def _normalise(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.where(n > 0, v / np.maximum(n, 1e-30), [0.0, 0.0, 1.0]).astype(np.float32)
+
+
+def write_png_raw(path: Path, data: np.ndarray) -> None:
+    """Write linear integer data (H, W) or (H, W, C in {3, 4}) as a PNG (uint8 or uint16)."""
+    import mitsuba as mi
+
+    data = np.ascontiguousarray(data if data.ndim == 3 else data[:, :, None])
+    fmt = {1: mi.Bitmap.PixelFormat.Y, 3: mi.Bitmap.PixelFormat.RGB, 4: mi.Bitmap.PixelFormat.RGBA}
+    bitmap = mi.Bitmap(data, pixel_format=fmt[data.shape[2]])
+    bitmap.set_srgb_gamma(False)
+    bitmap.write(str(path))
+
+
+def read_png_raw(path: Path) -> np.ndarray:
+    """Integer data (H, W, C) of a PNG, exactly as stored."""
+    import mitsuba as mi
+
+    data = np.asarray(mi.Bitmap(str(path)))
+    return data if data.ndim == 3 else data[:, :, None]
+
+
+def write_exr_channels(path: Path, channels: dict) -> None:
+    """Write float32 (H, W) planes under the given channel names (ZIP compression)."""
+    import OpenEXR
+
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {k: np.ascontiguousarray(v, np.float32) for k, v in channels.items()}) as f:
+        f.write(str(path))
+
+
+def read_exr_channels(path: Path) -> dict:
+    import OpenEXR
+
+    with OpenEXR.File(str(path), separate_channels=True) as f:
+        return {k: np.asarray(v.pixels, np.float32) for k, v in f.channels().items()}
+
+
+def write_map(out_dir: Path, fmt: str, maps: dict, meta: dict) -> Path:
+    """Encode ``maps`` in format ``fmt`` under ``out_dir/fmt.<ext>`` plus ``fmt.<ext>.json``.
+
+    Args:
+        maps: ``displacement`` (H, W), ``normal_tangent``, ``normal_object``,
+            ``direction_tangent`` (H, W, 3), optional ``back_depth`` (H, W); float32.
+        meta: shared metadata copied into the sidecar (low-poly file, max_distance, ...).
+    """
+    path = Path(out_dir) / f"{fmt}{FORMATS[fmt]}"
+    d = maps["displacement"]
+    nt, dirn = maps["normal_tangent"], maps["direction_tangent"]
+    side = {**meta, "format": fmt, "file": path.name, "width": int(d.shape[1]),
+            "height": int(d.shape[0]), "uv_convention": UV_CONVENTION}
+    if fmt in ("d8", "d16", "dir24_d8", "dir16_d16", "d8_n24", "d16_n16"):
+        bits = 16 if fmt in ("d16", "dir16_d16", "d16_n16") else 8
+        offset, span = _range(d)
+        q, scale = _quantise(d, offset, span, bits)
+        side["displacement"] = {"offset": offset, "scale": scale, "bits": bits}
+        hi, lo = (q >> 8).astype(np.uint8), (q & 255).astype(np.uint8)
+        if fmt == "d8":
+            data = q
+        elif fmt == "d16":
+            data = q
+        elif fmt == "dir24_d8":
+            data = np.dstack([_unit8(dirn), q])
+        elif fmt == "dir16_d16":
+            data = np.dstack([_unit8(dirn[..., :2]), hi, lo])
+        elif fmt == "d8_n24":
+            data = np.dstack([_unit8(nt), q])
+        else:  # d16_n16
+            data = np.dstack([hi, lo, _unit8(nt[..., :2])])
+        write_png_raw(path, data)
+    elif fmt == "dual_d8_n16":
+        back = maps.get("back_depth")
+        if back is None:
+            raise ValueError("format 'dual_d8_n16' needs the back depth (bake with it requested)")
+        offset, span = _range(d, back)
+        qf, scale = _quantise(d, offset, span, 8)
+        qb, _ = _quantise(back, offset, span, 8)
+        side["displacement"] = {"offset": offset, "scale": scale, "bits": 8}
+        write_png_raw(path, np.dstack([qf, qb, _unit8(nt[..., :2])]))
+    elif fmt == "float":
+        ch = {"D": d, "NX": nt[..., 0], "NY": nt[..., 1], "NZ": nt[..., 2],
+              "DX": dirn[..., 0], "DY": dirn[..., 1], "DZ": dirn[..., 2]}
+        if maps.get("back_depth") is not None:
+            ch["B"] = maps["back_depth"]
+        write_exr_channels(path, ch)
+        side["displacement"] = {"offset": 0.0, "scale": 1.0, "bits": 32}
+    elif fmt in ("normal_tangent", "normal_object"):
+        write_png_raw(path, _unit8(maps[fmt]))
+        side["space"] = fmt.split("_")[1]
+    side["tangent_convention"] = TANGENT_CONVENTION
+    Path(str(path) + ".json").write_text(json.dumps(side, indent=2))
+    return path
+
+
+def read_metadata(path: str | os.PathLike) -> dict:
+    """The sidecar of a map (``path`` may be the map or its ``.json``)."""
+    path = Path(path)
+    side = path if path.suffix == ".json" else Path(str(path) + ".json")
+    if not path.exists():
+        raise FileNotFoundError(f"map file {str(path)!r} does not exist")
+    if not side.is_file():
+        raise FileNotFoundError(f"map {str(path)!r}: metadata {str(side)!r} (scale/offset) is missing")
+    try:
+        meta = json.loads(side.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"map metadata {str(side)!r} is not valid JSON: {e}") from None
+    if meta.get("format") not in FORMATS:
+        raise ValueError(f"map metadata {str(side)!r}: unknown format {meta.get('format')!r}")
+    meta["_path"] = str(side.parent / meta["file"])
+    return meta
+
+
+def read_map(path: str | os.PathLike) -> dict:
+    """Decode a map written by :func:`write_map`.
+
+    Returns:
+        dict with ``displacement`` (H, W) float32 [object units] (``None`` for pure normal
+        maps), ``direction_tangent`` (H, W, 3) unit or ``None`` (along the normal),
+        ``normal_tangent`` (H, W, 3) or ``None``, ``back_depth`` or ``None``, ``meta``.
+    """
+    meta = read_metadata(path)
+    fmt, file = meta["format"], Path(meta["_path"])
+    if not file.is_file():
+        raise FileNotFoundError(f"map file {str(file)!r} (named by its metadata) does not exist")
+    out = {"displacement": None, "direction_tangent": None, "normal_tangent": None,
+           "back_depth": None, "meta": meta}
+    if fmt == "float":
+        ch = read_exr_channels(file)
+        out["displacement"] = ch["D"]
+        out["normal_tangent"] = _normalise(np.dstack([ch["NX"], ch["NY"], ch["NZ"]]))
+        out["direction_tangent"] = _normalise(np.dstack([ch["DX"], ch["DY"], ch["DZ"]]))
+        out["back_depth"] = ch.get("B")
+        return _with_valid(out, meta)
+    data = read_png_raw(file)
+    if fmt in ("normal_tangent", "normal_object"):
+        out["normal_tangent" if fmt == "normal_tangent" else "normal_object"] = _normalise(_from8(data[..., :3]))
+        return out
+    q = meta["displacement"]
+
+    def dec(values):
+        return (q["offset"] + q["scale"] * values.astype(np.float64)).astype(np.float32)
+
+    if fmt in ("d8", "d16"):
+        out["displacement"] = dec(data[..., 0])
+    elif fmt == "dir24_d8":
+        out["direction_tangent"] = _normalise(_from8(data[..., :3]))
+        out["displacement"] = dec(data[..., 3])
+    elif fmt == "dir16_d16":
+        out["direction_tangent"] = _complete_z(_from8(data[..., :2]))
+        out["displacement"] = dec(data[..., 2].astype(np.uint32) * 256 + data[..., 3])
+    elif fmt == "d8_n24":
+        out["normal_tangent"] = _normalise(_from8(data[..., :3]))
+        out["displacement"] = dec(data[..., 3])
+    elif fmt == "dual_d8_n16":
+        out["displacement"] = dec(data[..., 0])
+        out["back_depth"] = dec(data[..., 1])
+        out["normal_tangent"] = _complete_z(_from8(data[..., 2:4]))
+    elif fmt == "d16_n16":
+        out["displacement"] = dec(data[..., 0].astype(np.uint32) * 256 + data[..., 1])
+        out["normal_tangent"] = _complete_z(_from8(data[..., 2:4]))
+    return _with_valid(out, meta)
+
+
+def _with_valid(out: dict, meta: dict) -> dict:
+    """Add ``valid`` (H, W) float32 in {0, 1} from the mask the sidecar names, if any."""
+    out["valid"] = None
+    if meta.get("valid"):
+        path = Path(meta["_path"]).parent / meta["valid"]
+        if not path.is_file():
+            raise FileNotFoundError(f"validity mask {str(path)!r} named by the map metadata is missing")
+        out["valid"] = (read_png_raw(path)[..., 0] > 127).astype(np.float32)
+    return out

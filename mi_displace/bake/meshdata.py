@@ -1,0 +1,190 @@
+"""Triangle meshes of the baker: loading, welding, smooth normals and the tangent frame.
+
+A :class:`MeshData` holds NumPy arrays (one-off preprocessing; per-texel work is Dr.Jit):
+``positions`` (V, 3) float32 [object units], ``faces`` (F, 3) int64, ``uvs`` (V, 2) float32
+or ``None``.  UVs follow the OBJ / Blender / glTF-after-flip convention: *v points up*, so
+image row 0 (the top of a PNG) holds v = 1 (texel (col c, row r) has its centre at
+u = (c + 0.5) / W, v = 1 - (r + 0.5) / H).
+
+Normals are always recomputed here from the welded geometry (area-weighted face normals
+summed over every vertex at the same position), never read from the file, so UV-seam twins
+(same position, different UV) get the same normal in the baker and in restoration (§5:
+"alias information is used to restore smooth model normals").
+
+Tangents are a documented MikkTSpace equivalent: per-face tangent/bitangent from the UV
+gradients, accumulated per vertex with corner-angle weights (as MikkTSpace does),
+Gram-Schmidt orthogonalised against the vertex normal, handedness sign
+``sign = sign(dot(n x t, b))``; a shader rebuilds ``b = sign * cross(n, t)`` per pixel from
+the *interpolated* n and t (MikkTSpace's per-pixel bitangent convention).  It differs from
+MikkTSpace only in that MikkTSpace also splits tangents at degenerate UV corners.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl", ".glb", ".gltf")
+
+
+@dataclass
+class MeshData:
+    """A triangle mesh (NumPy).  Shapes: positions (V,3) f32, faces (F,3) i64, uvs (V,2) f32."""
+
+    positions: np.ndarray
+    faces: np.ndarray
+    uvs: np.ndarray | None = None
+    name: str = "mesh"
+    notes: list = field(default_factory=list)
+
+    @property
+    def diagonal(self) -> float:
+        """Bounding-box diagonal [object units]."""
+        return float(np.linalg.norm(self.positions.max(0) - self.positions.min(0)))
+
+    def normals(self) -> np.ndarray:
+        """(V, 3) float32 unit vertex normals from the welded geometry."""
+        return vertex_normals(self.positions, self.faces)
+
+    def to_trimesh(self):
+        import trimesh
+
+        return trimesh.Trimesh(self.positions.astype(np.float64), self.faces, process=False)
+
+
+def check_mesh(mesh: MeshData, what: str) -> MeshData:
+    """Validate shapes, indices and finiteness; raise ValueError naming ``what``."""
+    p, f = np.asarray(mesh.positions), np.asarray(mesh.faces)
+    if p.ndim != 2 or p.shape[1] != 3 or len(p) < 3:
+        raise ValueError(f"{what}: positions must have shape (V >= 3, 3), got {p.shape}")
+    if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
+        raise ValueError(f"{what}: faces must have shape (F > 0, 3), got {f.shape}")
+    if f.min() < 0 or f.max() >= len(p):
+        raise ValueError(f"{what}: face indices must lie in [0, {len(p)})")
+    if not np.all(np.isfinite(p)):
+        raise ValueError(f"{what}: {int((~np.isfinite(p)).sum())} NaN/Inf vertex coordinates")
+    if mesh.uvs is not None:
+        uv = np.asarray(mesh.uvs)
+        if uv.shape != (len(p), 2) or not np.all(np.isfinite(uv)):
+            raise ValueError(f"{what}: UVs must be finite with shape ({len(p)}, 2), got {uv.shape}")
+    area = np.linalg.norm(np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]]), axis=1)
+    if not area.sum() > 0:
+        raise ValueError(f"{what}: the mesh has zero surface area")
+    mesh.positions = p.astype(np.float32)
+    mesh.faces = f.astype(np.int64)
+    return mesh
+
+
+def load_mesh(path: str | os.PathLike, what: str = "mesh") -> MeshData:
+    """Read a triangle mesh (OBJ, PLY, OFF, STL, glTF) with trimesh, keeping UVs if present.
+
+    Raises:
+        FileNotFoundError: the file does not exist.
+        ValueError: unknown suffix, unreadable file, no triangles, NaN vertices.
+    """
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{what} file {str(path)!r} does not exist")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise ValueError(f"{what} file {str(path)!r}: suffix must be one of {', '.join(MESH_SUFFIXES)}")
+    try:
+        tm = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as e:  # trimesh raises many kinds on garbage input
+        raise ValueError(f"{what} file {str(path)!r} could not be read as a mesh: {e}") from None
+    if not isinstance(tm, trimesh.Trimesh) or len(tm.faces) == 0:
+        raise ValueError(f"{what} file {str(path)!r} holds no triangles")
+    uv = getattr(tm.visual, "uv", None)
+    uvs = None if uv is None or len(uv) != len(tm.vertices) else np.asarray(uv, np.float32)
+    return check_mesh(MeshData(np.asarray(tm.vertices, np.float32), np.asarray(tm.faces, np.int64),
+                               uvs, name=path.stem), f"{what} file {str(path)!r}")
+
+
+def save_obj(path: str | os.PathLike, positions, faces, uvs=None, normals=None) -> Path:
+    """Write an OBJ (exact float32 round trip: 9 significant digits) with optional vt / vn."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    f = np.asarray(faces, np.int64) + 1
+    parts = ["".join(f"v {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in np.asarray(positions, np.float32))]
+    if uvs is not None:
+        parts.append("".join(f"vt {u:.9g} {v:.9g}\n" for u, v in np.asarray(uvs, np.float32)))
+    if normals is not None:
+        parts.append("".join(f"vn {x:.6g} {y:.6g} {z:.6g}\n" for x, y, z in np.asarray(normals, np.float32)))
+    if uvs is not None and normals is not None:
+        parts.append("".join(f"f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}\n" for a, b, c in f))
+    elif uvs is not None:
+        parts.append("".join(f"f {a}/{a} {b}/{b} {c}/{c}\n" for a, b, c in f))
+    else:
+        parts.append("".join(f"f {a} {b} {c}\n" for a, b, c in f))
+    path.write_text("".join(parts))
+    return path
+
+
+def weld_ids(positions: np.ndarray) -> np.ndarray:
+    """(V,) alias id of every vertex: twins at bit-identical float32 positions share one (§5)."""
+    _, inverse = np.unique(np.asarray(positions, np.float32), axis=0, return_inverse=True)
+    return inverse.ravel()
+
+
+def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V, 3) float32 area-weighted vertex normals, summed over welded twins (alias buffer)."""
+    p = np.asarray(positions, np.float64)
+    fn = np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]])
+    weld = weld_ids(positions)
+    acc = np.zeros((weld.max() + 1, 3))
+    for k in range(3):
+        np.add.at(acc, weld[faces[:, k]], fn)
+    n = acc[weld]
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.where(length > 0, n / np.maximum(length, 1e-300), [0.0, 0.0, 1.0]).astype(np.float32)
+
+
+def tangent_frame(positions, faces, uvs, normals) -> tuple[np.ndarray, np.ndarray]:
+    """MikkTSpace-equivalent per-vertex tangents (V, 3) float32 and handedness signs (V,).
+
+    See the module docstring.  Vertices whose faces all have degenerate UVs get any unit
+    vector orthogonal to their normal and sign +1.
+    """
+    p = np.asarray(positions, np.float64)
+    uv = np.asarray(uvs, np.float64)
+    n = np.asarray(normals, np.float64)
+    tan = np.zeros_like(p)
+    bit = np.zeros_like(p)
+    e1, e2 = p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]]
+    d1, d2 = uv[faces[:, 1]] - uv[faces[:, 0]], uv[faces[:, 2]] - uv[faces[:, 0]]
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    ok = np.abs(det) > 1e-20
+    r = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
+    t_face = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * r          # dP/du
+    b_face = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * r          # dP/dv
+    for k in range(3):  # corner-angle weights, as MikkTSpace
+        a = p[faces[:, (k + 1) % 3]] - p[faces[:, k]]
+        b = p[faces[:, (k + 2) % 3]] - p[faces[:, k]]
+        cosang = np.einsum("ij,ij->i", a, b) / np.maximum(
+            np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
+        w = np.arccos(np.clip(cosang, -1, 1))[:, None]
+        tn = t_face / np.maximum(np.linalg.norm(t_face, axis=1, keepdims=True), 1e-300)
+        bn = b_face / np.maximum(np.linalg.norm(b_face, axis=1, keepdims=True), 1e-300)
+        np.add.at(tan, faces[:, k], w * tn)
+        np.add.at(bit, faces[:, k], w * bn)
+    t = tan - n * np.einsum("ij,ij->i", n, tan)[:, None]       # Gram-Schmidt against n
+    length = np.linalg.norm(t, axis=1, keepdims=True)
+    fallback = np.cross(n, np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
+    fallback /= np.maximum(np.linalg.norm(fallback, axis=1, keepdims=True), 1e-300)
+    t = np.where(length > 1e-12, t / np.maximum(length, 1e-300), fallback)
+    sign = np.where(np.einsum("ij,ij->i", np.cross(n, t), bit) < 0, -1.0, 1.0)
+    return t.astype(np.float32), sign.astype(np.float32)
+
+
+def uv_triangle_stats(uvs: np.ndarray, faces: np.ndarray) -> dict:
+    """Counts of degenerate (zero UV area) and flipped (negative UV area) triangles."""
+    a = uvs[faces[:, 1]] - uvs[faces[:, 0]]
+    b = uvs[faces[:, 2]] - uvs[faces[:, 0]]
+    area = 0.5 * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+    return {"uv_degenerate_triangles": int((np.abs(area) < 1e-14).sum()),
+            "uv_flipped_triangles": int((area < -1e-14).sum()),
+            "uv_outside_unit_square": int(((uvs < 0) | (uvs > 1)).any(1).sum()),
+            "uv_area_sum": float(np.abs(area).sum())}

@@ -1,0 +1,193 @@
+"""Distance rays from the low-poly surface into the high-poly (§2 Fig. 5, §3.2 step 2c, §4 Fig. 8).
+
+For every covered sample (low-poly triangle + barycentrics from :mod:`uv_raster`) the low-poly
+point p, the interpolated normal n and tangent frame are built, and the high-poly is hit with
+Mitsuba's acceleration structure:
+
+* **normal mode** — two rays, along +n from p - delta n and along -n from p + delta n, each
+  within ``max_distance + delta`` (the paper's *maximum displacement*, §3.2 step 2b).
+  ``delta`` (1e-6 of the bounding-box diagonal by default) makes a high-poly surface that
+  passes exactly through p visible to both rays.
+  **Hit rule.** A hit is *front-facing* when the high-poly face is oriented like the low-poly
+  there (dot(face normal, n) > 0): the surface the ray is meant to measure.  The nearest
+  front-facing hit of the two rays wins (ties go outward); only if neither ray has one does
+  the nearest back-facing hit count, flagged ``backface``.  When both rays hit front-facing faces at
+  different crossings, the normal line leaves the high-poly twice within +-max_distance (a
+  fold or overhang; a thin shell's far wall is back-facing and does not count): the
+  projection is ambiguous (height-field assumption broken, §3.1), flagged ``ambiguous`` (the
+  value of the rule above is still written).
+* **cage mode** (Fig. 8: rays along directions set by a transformed copy of the low-poly) — a
+  cage with the low-poly's topology; the ray leaves the interpolated cage point q towards p and
+  runs until ``max_distance`` past p.  The displacement is measured along that direction
+  (outward = from p towards q), and the direction itself is stored for the direction formats
+  of §1.2.  A second ray from the hit onward flags ``ambiguous`` crossings.
+
+Signed displacement d [object units]: positive outside the low-poly (along n or towards the
+cage).  Misses are re-traced without distance limit to tell ``beyond`` (a hit exists farther
+than ``max_distance``) from ``miss`` (nothing at all).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mi_displace.bake.meshdata import MeshData
+from mi_displace.core.tessellate import gather as _gather_all
+
+# Per-sample status, ordered so that the largest code is the worst (texel status = max).
+EMPTY, OK, AMBIGUOUS, BACKFACE, BEYOND, MISS = 0, 1, 2, 3, 4, 5
+STATUS_NAMES = {EMPTY: "empty", OK: "ok", AMBIGUOUS: "ambiguous", BACKFACE: "backface",
+                BEYOND: "beyond", MISS: "miss"}
+
+
+def gather(cls, source, index, active=True):
+    """Masked dr.gather of a vector type, component by component (``active`` = in bounds)."""
+    if active is True:
+        return _gather_all(cls, source, index)
+    return cls(*(dr.gather(type(c), c, index, active) for c in source))
+
+
+def _vec(a: np.ndarray, cls=mi.Vector3f):
+    a = np.asarray(a, np.float32)
+    return cls(*[mi.Float(np.ascontiguousarray(a[:, k])) for k in range(a.shape[1])])
+
+
+class HighPoly:
+    """The high-poly in a Mitsuba scene (its BVH) plus face and vertex normals on the device."""
+
+    def __init__(self, high: MeshData):
+        V, F = len(high.positions), len(high.faces)
+        mesh = mi.Mesh("high_poly", V, F, has_vertex_normals=False, has_vertex_texcoords=False)
+        params = mi.traverse(mesh)
+        params["vertex_positions"] = mi.Float(np.ascontiguousarray(high.positions.ravel()))
+        params["faces"] = mi.UInt32(np.ascontiguousarray(high.faces.astype(np.uint32).ravel()))
+        params.update()
+        self.scene = mi.load_dict({"type": "scene", "high": mesh})
+        p = high.positions.astype(np.float64)
+        fn = np.cross(p[high.faces[:, 1]] - p[high.faces[:, 0]], p[high.faces[:, 2]] - p[high.faces[:, 0]])
+        self.face_normals = _vec(fn)
+        self.vertex_normals = _vec(high.normals())
+        self.faces = mi.Vector3u(*[mi.UInt32(high.faces[:, k].astype(np.uint32)) for k in range(3)])
+
+    def shading_normal(self, prim: mi.UInt32, b1: mi.Float, b2: mi.Float,
+                       active: mi.Bool) -> mi.Vector3f:
+        """Interpolated (smooth) high-poly normal at a hit (``active``: valid hits only)."""
+        f = [dr.gather(mi.UInt32, self.faces[k], prim, active) for k in range(3)]
+        n = (gather(mi.Vector3f, self.vertex_normals, f[0], active) * (1.0 - b1 - b2)
+             + gather(mi.Vector3f, self.vertex_normals, f[1], active) * b1
+             + gather(mi.Vector3f, self.vertex_normals, f[2], active) * b2)
+        return dr.normalize(n)
+
+    def facing(self, prim: mi.UInt32, n: mi.Vector3f, active: mi.Bool) -> mi.Bool:
+        """True where a valid (``active``) hit face is oriented like the low-poly normal n."""
+        return active & (dr.dot(gather(mi.Vector3f, self.face_normals, prim, active), n) > 0)
+
+
+class LowPolyDevice:
+    """Low-poly attributes on the device: positions, normals, tangents, signs, optional cage."""
+
+    def __init__(self, low: MeshData, normals: np.ndarray, tangents: np.ndarray,
+                 signs: np.ndarray, cage: np.ndarray | None = None):
+        self.faces = [mi.UInt32(low.faces[:, k].astype(np.uint32)) for k in range(3)]
+        self.p = _vec(low.positions, mi.Point3f)
+        self.n = _vec(normals)
+        self.t = _vec(tangents)
+        self.sign = mi.Float(np.asarray(signs, np.float32))
+        self.cage = None if cage is None else _vec(cage, mi.Point3f)
+
+    def interpolate(self, prim, b1, b2):
+        """p, unnormalised n and t, per-pixel bitangent sign*(n x t) and the cage point q."""
+        f = [dr.gather(mi.UInt32, self.faces[k], prim) for k in range(3)]
+        w = (1.0 - b1 - b2, b1, b2)
+
+        def lerp(cls, arr):
+            return sum((gather(cls, arr, f[k]) * w[k] for k in (1, 2)), gather(cls, arr, f[0]) * w[0])
+
+        p, n, t = lerp(mi.Point3f, self.p), lerp(mi.Vector3f, self.n), lerp(mi.Vector3f, self.t)
+        s = dr.sign(sum((dr.gather(mi.Float, self.sign, f[k]) * w[k] for k in (1, 2)),
+                        dr.gather(mi.Float, self.sign, f[0]) * w[0]))
+        q = None if self.cage is None else lerp(mi.Point3f, self.cage)
+        return p, n, t, s * dr.cross(n, t), q
+
+
+@dataclass
+class TraceResult:
+    """Per-sample outputs (Dr.Jit arrays of the samples' width)."""
+
+    status: mi.UInt32
+    displacement: mi.Float          # signed, object units
+    normal_object: mi.Vector3f      # high-poly shading normal (object space), unit
+    normal_tangent: mi.Vector3f     # the same in the low-poly's tangent frame, unit
+    direction_tangent: mi.Vector3f  # displacement direction in the tangent frame, unit
+    back_depth: mi.Float | None     # dual-depth: signed displacement of the surface behind
+
+
+def _tangent_space(t, b, n, v):
+    """Solve [t b n] x = v (the exact inverse of the shader's t*x + b*y + n*z), normalised."""
+    m = mi.Matrix3f(t.x, b.x, n.x, t.y, b.y, n.y, t.z, b.z, n.z)
+    x = dr.rcp(m) @ v  # matrix inverse
+    ok = dr.all(dr.isfinite(x)) & (dr.squared_norm(x) > 0)
+    return dr.select(ok, dr.normalize(x), mi.Vector3f(0, 0, 1))
+
+
+def _hit(scene, o, d, maxt):
+    """Preliminary intersections, evaluated at once (else every field re-traces the rays)."""
+    pi = scene.ray_intersect_preliminary(mi.Ray3f(o, d, maxt, 0.0, []), coherent=False)
+    dr.eval(pi.t, pi.prim_index, pi.prim_uv)
+    return pi
+
+
+def trace(high: HighPoly, low: LowPolyDevice, prim, b1, b2, max_distance: float,
+          delta: float, dual_depth: bool = False) -> TraceResult:
+    """Trace the samples (see the module docstring); all arguments per sample."""
+    p, n_raw, t, b, q = low.interpolate(prim, b1, b2)
+    n = dr.normalize(n_raw)
+    dr.eval(p, n, n_raw, t, b, q)  # shared by every ray kernel below
+    if q is None:
+        pa = _hit(high.scene, p - delta * n, n, max_distance + delta)
+        pb = _hit(high.scene, p + delta * n, -n, max_distance + delta)
+        va, vb = pa.is_valid(), pb.is_valid()
+        da, db = pa.t - delta, -(pb.t - delta)
+        fa, fb = high.facing(pa.prim_index, n, va), high.facing(pb.prim_index, n, vb)
+        pick_a = dr.select(fa | fb, fa & (~fb | (dr.abs(da) <= dr.abs(db))),
+                           va & (~vb | (dr.abs(da) <= dr.abs(db))))
+        found = va | vb
+        front = dr.select(pick_a, fa, fb)
+        ambiguous = fa & fb & (dr.abs(da - db) > 2 * delta)
+        d = dr.select(found, dr.select(pick_a, da, db), 0.0)
+        prim_h = dr.select(pick_a, pa.prim_index, pb.prim_index)
+        uv_h = dr.select(pick_a, pa.prim_uv, pb.prim_uv)
+        direction = n
+    else:  # cage: from q through p (Fig. 8)
+        to_p = p - q
+        span = dr.norm(to_p)
+        dirn = to_p / dr.maximum(span, 1e-30)
+        pc = _hit(high.scene, q, dirn, span + max_distance)
+        found = pc.is_valid()
+        front = high.facing(pc.prim_index, n, found)
+        d = dr.select(found, span - pc.t, 0.0)
+        prim_h, uv_h = pc.prim_index, pc.prim_uv
+        nxt = _hit(high.scene, q + dirn * (pc.t + delta), dirn, span + max_distance - pc.t - delta)
+        ambiguous = found & nxt.is_valid()
+        direction = -dirn
+    u32 = mi.UInt32
+    status = dr.select(found, dr.select(front, dr.select(ambiguous, u32(AMBIGUOUS), u32(OK)),
+                                        u32(BACKFACE)), u32(MISS))
+    # misses: is there a hit farther than max_distance?
+    miss = dr.compress(~found)
+    if dr.width(miss):
+        pm = dr.gather(mi.Point3f, p, miss)
+        dm = dr.gather(mi.Vector3f, direction, miss)
+        far = _hit(high.scene, pm, dm, dr.inf).is_valid() | _hit(high.scene, pm, -dm, dr.inf).is_valid()
+        dr.scatter(status, dr.select(far, u32(BEYOND), u32(MISS)), miss)
+    n_high = dr.select(found, high.shading_normal(prim_h, uv_h.x, uv_h.y, found), n)
+    back = None
+    if dual_depth:  # the next surface behind the chosen one, down to the lower plane
+        start = p + direction * d
+        pd = _hit(high.scene, start - direction * delta, -direction, d + max_distance)
+        back = dr.select(found & pd.is_valid(), d - delta - pd.t, -max_distance)
+    return TraceResult(status, d, n_high, _tangent_space(t, b, n_raw, n_high),
+                       _tangent_space(t, b, n_raw, direction), back)

@@ -1,0 +1,176 @@
+"""`mi-displace bench bake`: the baker's timing table, restoration error and compression.
+
+Pair: the Stanford bunny (``data/bunny/stanford-bunny.obj``, 69,451 faces, the paper's
+"Rabbit") and a low-poly of 4,857 faces (the paper's count, Fig. 15) simplified from it with
+fast-simplification and unwrapped with xatlas (preparation, not timed).
+
+* timing table (Fig. 13/14/17): warm bake time at 512..4096 texels, aa 1 and 2 (2x2 = 4
+  samples, the paper's 4x AA), each *including* the acceleration structures (high-poly BVH and
+  UV layout) and edge padding; beside it the naive per-texel baker
+  (:mod:`mi_displace.bake.naive`, trimesh + Embree) on the same rays where it runs in
+  reasonable time (up to 2048^2 without AA, 1024^2 with);
+* restoration at 1024^2 with two levels of 1->4 subdivision, restored from the 16-bit map:
+  meshdiff against the original (written to ``docs/figures/bake_meshdiff.json``);
+* compression (Fig. 21) at 1024^2 for PNG-16, EXR-zip and JPEG 2000 with their restoration
+  error (``docs/figures/bake_compression.json``).
+
+Everything is written to ``docs/figures/bake_bench.json`` too.
+"""
+from __future__ import annotations
+
+import json as _json
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import drjit as dr
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[2]
+FIGURES = REPO / "docs" / "figures"
+HIGH = REPO / "data" / "bunny" / "stanford-bunny.obj"
+LOW_FACES = 4857
+
+
+def _pair():
+    from mi_displace.bake.meshdata import load_mesh
+    from mi_displace.bake.unwrap import make_low_poly, unwrap
+
+    high = load_mesh(HIGH, "high-poly")
+    low = unwrap(make_low_poly(high, LOW_FACES, smoothing_iterations=0))
+    return high, low
+
+
+def bake_warm(high, low, res: int, aa: int, max_distance: float, delta: float) -> float:
+    """Seconds of one in-memory bake: acceleration structures + raster/trace + padding."""
+    from mi_displace.bake import padding
+    from mi_displace.bake.baker import Baker
+    from mi_displace.bake.trace import EMPTY, OK
+
+    start = time.perf_counter()
+    baker = Baker(high, low)
+    image, _ = baker.run(res, res, aa, max_distance, delta, False)
+    status = image[..., Baker.CHANNELS["status"][0]]
+    padding.pad(image, status == OK, 8)
+    padding.pad((status == OK).astype(np.float32), status != EMPTY, 8)
+    dr.sync_thread()
+    return time.perf_counter() - start
+
+
+def _median(fn, repeats: int) -> float:
+    return statistics.median(fn() for _ in range(repeats))
+
+
+def timing_table(high, low, max_distance, delta) -> list[dict]:
+    from mi_displace.bake.naive import naive_bake
+
+    rows = []
+    bake_warm(high, low, 256, 1, max_distance, delta)  # cold: JIT compilation
+    bake_warm(high, low, 256, 2, max_distance, delta)
+    for res in (512, 1024, 2048, 4096):
+        for aa in (1, 2):
+            reps = 3 if res * aa <= 2048 else 1
+            ours = _median(lambda: bake_warm(high, low, res, aa, max_distance, delta), reps)
+            naive = None
+            if res * aa <= 2048:
+                start = time.perf_counter()
+                naive_bake(high, low, res, max_distance, delta, aa)
+                naive = time.perf_counter() - start
+            rows.append({"res": res, "aa": aa, "samples_per_texel": aa * aa, "ours_s": ours,
+                         "naive_s": naive, "speedup": None if naive is None else naive / ours})
+    return rows
+
+
+def restoration_and_compression(high, low) -> tuple[dict, list[dict]]:
+    from mi_displace.bake import compression
+    from mi_displace.bake.baker import bake
+    from mi_displace.bake.restore import restore
+    from mi_displace.evaluate.metrics import mesh_distance
+
+    with tempfile.TemporaryDirectory() as tmp:
+        result = bake(high, low, res=1024, out_dir=tmp, map_formats=["d16", "float"])
+        restored = restore(Path(tmp) / "low.obj", Path(tmp) / "d16.png", levels=2)
+        diff = mesh_distance((high.positions, high.faces), (restored.positions, restored.faces))
+        low_only = mesh_distance((high.positions, high.faces), (low.positions, low.faces))
+        meshdiff = {"a": "data/bunny/stanford-bunny.obj", "b": "restored (1024^2 d16.png, levels 2)",
+                    "restored_faces": int(len(restored.faces)), "restore_s": restored.seconds,
+                    **diff, "low_poly_only": {k: low_only[k] for k in ("rms_rel", "hausdorff_rel")}}
+        original = compression.mesh_bytes(high, with_uvs=False)
+        low_b = compression.mesh_bytes(low, with_uvs=True)
+        mask_b = compression.mask_bytes(result.maps["valid"])
+        rows = []
+        for codec in ("png16", "exr_zip", "jpeg2k"):
+            size, decoded = compression.encode_map(result.maps["displacement"], codec)
+            r = restore(low, {"displacement": decoded, "valid": result.maps["valid"]}, levels=2)
+            d = mesh_distance((high.positions, high.faces), (r.positions, r.faces), samples=50_000)
+            total = low_b + size + mask_b
+            rows.append({"codec": codec, "map_bytes": size, "low_bytes": low_b, "mask_bytes": mask_b,
+                         "original_bytes": original, "ratio": original / total,
+                         "hausdorff_rel": d["hausdorff_rel"], "rms_rel": d["rms_rel"]})
+    return meshdiff, rows
+
+
+def run() -> dict:
+    from mi_displace.bake.baker import DEFAULT_DELTA_REL, DEFAULT_MAX_DISTANCE_REL
+
+    high, low = _pair()
+    max_distance = DEFAULT_MAX_DISTANCE_REL * high.diagonal
+    delta = DEFAULT_DELTA_REL * high.diagonal
+    table = timing_table(high, low, max_distance, delta)
+    meshdiff, comp = restoration_and_compression(high, low)
+    row2048 = next(r for r in table if r["res"] == 2048 and r["aa"] == 1)
+    png16 = next(r for r in comp if r["codec"] == "png16")
+    record = {
+        "high_faces": int(len(high.faces)), "low_faces": int(len(low.faces)),
+        "bake_time_warm_s": row2048["ours_s"], "naive_time_s": row2048["naive_s"],
+        "speedup_vs_naive": row2048["speedup"],
+        "restore_hausdorff_rel": meshdiff["hausdorff_rel"], "restore_rms_rel": meshdiff["rms_rel"],
+        "compression_ratio": png16["ratio"],
+        "timing_table": table, "compression": comp, "meshdiff": meshdiff,
+        "targets": {"bake_time_warm_s": 1.5, "speedup_vs_naive": 3.0, "restore_hausdorff_rel": 0.005},
+    }
+    FIGURES.mkdir(parents=True, exist_ok=True)
+    (FIGURES / "bake_meshdiff.json").write_text(_json.dumps(meshdiff, indent=2))
+    (FIGURES / "bake_compression.json").write_text(_json.dumps(comp, indent=2))
+    (FIGURES / "bake_bench.json").write_text(_json.dumps(record, indent=2))
+    _plot(table, comp)
+    return record
+
+
+def _plot(table, comp) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+    for aa in (1, 2):
+        rows = [r for r in table if r["aa"] == aa]
+        ax[0].plot([r["res"] for r in rows], [r["ours_s"] for r in rows], "o-", label=f"ours, aa {aa}")
+        nv = [r for r in rows if r["naive_s"] is not None]
+        ax[0].plot([r["res"] for r in nv], [r["naive_s"] for r in nv], "s--", label=f"naive, aa {aa}")
+    ax[0].set(xscale="log", yscale="log", xlabel="map side [texels]", ylabel="bake time [s]",
+              title="bunny 69k -> 4.9k faces (2 cores)")
+    ax[0].legend()
+    for r in comp:
+        ax[1].scatter(r["ratio"], r["hausdorff_rel"] * 100, label=r["codec"])
+    ax[1].set(xlabel="compression ratio (original / (low + map + mask))",
+              ylabel="Hausdorff [% of diagonal]", title="restoration at 1024^2, 2 levels")
+    ax[1].legend()
+    fig.tight_layout()
+    fig.savefig(FIGURES / "bake_bench.png", dpi=100)
+    plt.close(fig)
+
+
+def main(json: bool = False) -> int:
+    record = run()
+    if json:
+        print(_json.dumps(record, indent=2))
+    else:
+        for key in ("bake_time_warm_s", "naive_time_s", "speedup_vs_naive", "restore_hausdorff_rel",
+                    "restore_rms_rel", "compression_ratio"):
+            print(f"{key:>24}: {record[key]:.4g}")
+        for r in record["timing_table"]:
+            print(r)
+    return 0
