@@ -95,7 +95,7 @@ class DDM(mi.Mesh):
                              "'w_offset' and the tile)")
         self.build_stats = {**self.model.stats(), "map_s": time.perf_counter() - start,
                             "bytes": self.model.memory_report()["mesh_bytes"]}
-        if self.model.maps is not None and self.model.pruned >= 0 and not self.model.maps.valid.all():
+        if self.model.maps is not None and not self.model.maps.valid.all():
             self.build_stats["clamped_vertices"] = int(np.sum(~self.model.maps.texel_valid(uv.x, uv.y)))
 
     def traverse(self, cb):

@@ -94,6 +94,8 @@ class BezierBody(BaseSurface):
 
     def sample(self, u, v):
         C, R = self.cols, self.rows
+        if self.periodic_u:   # wrap around the pot (tiles crossing the seam)
+            u = u - dr.floor(u)
         su, sv = u * C, v * R
         col = mi.UInt32(dr.clip(mi.Int32(dr.floor(su)), 0, C - 1))
         row = mi.UInt32(dr.clip(mi.Int32(dr.floor(sv)), 0, R - 1))

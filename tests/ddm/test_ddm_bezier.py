@@ -23,6 +23,8 @@ def test_teapot_body_is_closed_around_and_continuous(variant):
     v = mi.Float(np.linspace(0, 1, 40))
     a, b = body.sample(dr.zeros(mi.Float, 40), v), body.sample(dr.ones(mi.Float, 40), v)
     assert np.allclose(_np(a.p), _np(b.p), atol=1e-5)
+    c, d = body.sample(dr.zeros(mi.Float, 40) + 0.1, v), body.sample(dr.zeros(mi.Float, 40) + 1.1, v)
+    assert np.allclose(_np(c.p), _np(d.p), atol=1e-5)     # u wraps (tiles across the seam)
     # C0 across patch boundaries (columns at u = k/4, rows at v = 1/3, 2/3)
     for k in (0.25, 0.5, 0.75):
         lo = body.sample(dr.zeros(mi.Float, 40) + (k - 1e-6), v)
