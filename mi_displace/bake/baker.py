@@ -29,7 +29,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.bake import diagnostics, formats, padding, unwrap
-from mi_displace.bake.meshdata import (MeshData, load_mesh, save_obj, tangent_frame,
+from mi_displace.bake.meshdata import (MeshData, check_mesh, load_mesh, save_obj, tangent_frame,
                                        uv_triangle_stats)
 from mi_displace.bake.trace import AMBIGUOUS, EMPTY, HighPoly, LowPolyDevice, OK, trace
 from mi_displace.bake.uv_raster import (OVERLAP_RESOLUTION, UVLayout, overlap_texels,
@@ -106,9 +106,9 @@ def prepare_inputs(high, low=None, target_faces: int = 5000, smoothing_iteration
     """Load (paths) or check (MeshData) both meshes; simplify / unwrap where needed."""
     timings = {}
     start = time.perf_counter()
-    high = high if isinstance(high, MeshData) else load_mesh(high, "high-poly")
-    if low is not None and not isinstance(low, MeshData):
-        low = load_mesh(low, "low-poly")
+    high = check_mesh(high, "high-poly") if isinstance(high, MeshData) else load_mesh(high, "high-poly")
+    if low is not None:
+        low = check_mesh(low, "low-poly") if isinstance(low, MeshData) else load_mesh(low, "low-poly")
     timings["load_s"] = time.perf_counter() - start
     if low is None:
         start = time.perf_counter()

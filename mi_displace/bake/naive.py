@@ -67,6 +67,7 @@ def naive_bake(high: MeshData, low: MeshData, res: int, max_distance: float, del
     value = np.full(len(origins), np.nan)
     value[np.flatnonzero(hit)[found]] = d[found]
     value = value.reshape(res * res, aa * aa)
-    with np.errstate(invalid="ignore"):
-        out = np.nanmean(np.where(np.isnan(value), np.nan, value), axis=1) if aa > 1 else value[:, 0]
+    count = np.isfinite(value).sum(1)
+    total = np.where(np.isfinite(value), value, 0.0).sum(1)
+    out = np.where(count > 0, total / np.maximum(count, 1), np.nan)
     return out.reshape(res, res).astype(np.float32)

@@ -50,8 +50,10 @@ def gather(cls, source, index, active=True):
     return cls(*(dr.gather(type(c), c, index, active) for c in source))
 
 
-def _vec(a: np.ndarray, cls=mi.Vector3f):
+def _vec(a: np.ndarray, cls=None):
+    """(N, k) NumPy -> a Dr.Jit vector of type ``cls`` (default mi.Vector3f)."""
     a = np.asarray(a, np.float32)
+    cls = cls or mi.Vector3f
     return cls(*[mi.Float(np.ascontiguousarray(a[:, k])) for k in range(a.shape[1])])
 
 

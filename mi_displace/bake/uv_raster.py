@@ -151,6 +151,7 @@ def _clamped_barycentrics(layout: UVLayout, tri: mi.UInt32, p: mi.Point2f):
 
 
 OVERLAP_RESOLUTION = 512
+OVERLAP_EPSILON = 1e-4  # barycentric margin: points on shared edges are not overlaps
 
 
 def overlap_texels(layout: UVLayout, res: int) -> int:
@@ -164,5 +165,11 @@ def overlap_texels(layout: UVLayout, res: int) -> int:
     u = (mi.Float(idx % res) + 0.5) / res
     v = 1.0 - (mi.Float(idx // res) + 0.5) / res
     top, bottom = _cast(layout, u, v), _cast(layout, u, v, up=True)
-    both = top.is_valid() & bottom.is_valid() & (top.prim_index != bottom.prim_index)
+
+    def inside(pi):  # strictly inside (not on an edge shared by neighbouring triangles)
+        b1, b2 = pi.prim_uv.x, pi.prim_uv.y
+        return dr.minimum(dr.minimum(b1, b2), 1.0 - b1 - b2) > OVERLAP_EPSILON
+
+    both = (top.is_valid() & bottom.is_valid() & (top.prim_index != bottom.prim_index)
+            & inside(top) & inside(bottom))
     return int(dr.count(both)[0] if hasattr(dr.count(both), "__len__") else dr.count(both))

@@ -1,0 +1,65 @@
+"""Every §1.2 format round-trips through its file and sidecar within its quantisation step."""
+import json
+
+import numpy as np
+import pytest
+
+from mi_displace.bake import formats
+
+
+def _maps(h=16, w=24, seed=0):
+    rng = np.random.default_rng(seed)
+    d = rng.uniform(-0.3, 0.7, (h, w)).astype(np.float32)
+    def unit(z_min):
+        v = rng.normal(size=(h, w, 3))
+        v[..., 2] = np.abs(v[..., 2]) + z_min
+        return (v / np.linalg.norm(v, axis=-1, keepdims=True)).astype(np.float32)
+    return {"displacement": d, "normal_tangent": unit(0.5), "normal_object": unit(-1.0),
+            "direction_tangent": unit(0.5), "back_depth": (d - 0.2).astype(np.float32)}
+
+
+@pytest.mark.parametrize("fmt", sorted(formats.FORMATS))
+def test_round_trip(tmp_path, variant, fmt):
+    maps = _maps()
+    path = formats.write_map(tmp_path, fmt, maps, {"low": "low.obj"})
+    meta = json.loads((tmp_path / (path.name + ".json")).read_text())
+    assert meta["format"] == fmt and meta["width"] == 24 and meta["height"] == 16
+    out = formats.read_map(path)
+    if out["displacement"] is not None:
+        step = meta["displacement"]["scale"] if meta["displacement"]["bits"] < 32 else 0.0
+        err = np.abs(out["displacement"] - maps["displacement"]).max()
+        assert err <= 0.5 * step + 1e-6, (fmt, err, step)
+        assert np.all(np.isfinite(out["displacement"]))
+    one_byte = 2.0 / 255  # one 8-bit step of a [-1, 1] component
+    for key in ("normal_tangent", "direction_tangent", "back_depth", "normal_object"):
+        if out.get(key) is not None:
+            tol = 1e-6 if fmt == "float" else (3 * one_byte if key != "back_depth" else 0.5 * meta["displacement"]["scale"] + 1e-6)
+            assert np.abs(out[key] - maps[key]).max() <= tol, (fmt, key)
+
+
+def test_formats_carry_what_they_promise(tmp_path, variant):
+    maps = _maps()
+    carried = {f: formats.read_map(formats.write_map(tmp_path, f, maps, {})) for f in formats.FORMATS}
+    assert carried["dir24_d8"]["direction_tangent"] is not None
+    assert carried["dir16_d16"]["direction_tangent"] is not None
+    assert carried["d8_n24"]["normal_tangent"] is not None
+    assert carried["dual_d8_n16"]["back_depth"] is not None
+    assert carried["d8"]["normal_tangent"] is None and carried["d8"]["direction_tangent"] is None
+    # 16-bit displacement is 257x finer than 8-bit
+    s8 = json.loads((tmp_path / "d8.png.json").read_text())["displacement"]["scale"]
+    s16 = json.loads((tmp_path / "d16_n16.png.json").read_text())["displacement"]["scale"]
+    assert s8 / s16 == pytest.approx(65535 / 255)
+
+
+def test_bad_input(tmp_path, variant):
+    with pytest.raises(ValueError, match="formats"):
+        formats.check_formats(["d8", "d12"])
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        formats.read_map(tmp_path / "none.png")
+    path = formats.write_map(tmp_path, "d8", _maps(), {})
+    (tmp_path / "d8.png.json").unlink()
+    with pytest.raises(FileNotFoundError, match="metadata"):
+        formats.read_map(path)
+    (tmp_path / "d8.png.json").write_text("{not json")
+    with pytest.raises(ValueError, match="not valid JSON"):
+        formats.read_map(path)

@@ -1,0 +1,101 @@
+"""Restoration (§5): subdivision counts, alias-welded seams, holes, CLI round trip."""
+import json
+
+import numpy as np
+import pytest
+from conftest import plane
+
+from mi_displace.bake.baker import bake
+from mi_displace.bake.meshdata import weld_ids
+from mi_displace.bake.restore import edge_splits, restore
+from mi_displace.cli import main
+
+
+def test_subdivision_counts_and_seams_without_cracks(sphere_pair, tmp_path):
+    high, low = sphere_pair
+    bake(high, low, res=64, out_dir=tmp_path, map_formats=["d8"], max_distance=0.2)
+    for levels, split in ((1, None), (2, None), (None, 3)):
+        out = restore(tmp_path / "low.obj", tmp_path / "d8.png", levels=levels, split=split)
+        L = edge_splits(levels, split)
+        assert len(out.faces) == len(low.faces) * L * L
+        assert np.all(np.isfinite(out.positions)) and np.all(np.isfinite(out.normals))
+        # twins on the UV seam: their texels differ (8-bit, bilinear) but positions agree
+        import trimesh
+
+        tm = trimesh.Trimesh(out.positions, out.faces, process=False)
+        tm.merge_vertices(merge_tex=True, merge_norm=True)
+        assert len(tm.faces) == len(out.faces)
+        assert tm.is_watertight or len(trimesh.grouping.group_rows(tm.edges_sorted, require_count=1)) == 0
+
+
+def test_twins_displace_identically(variant):
+    # a square split into two UV islands: the middle column of vertices is duplicated
+    lo = plane(n=2)
+    left = lo.faces[np.isin(lo.faces, [0, 3, 6]).any(1)]
+    right_ids = np.array([1, 4, 7])
+    pos = np.concatenate([lo.positions, lo.positions[right_ids]])
+    uvs = np.concatenate([lo.uvs * [0.45, 1], lo.uvs[right_ids] * [0.45, 1] + [0.1, 0]]).astype(np.float32)
+    uvs[[1, 2, 4, 5, 7, 8]] += [0.1, 0]
+    remap = np.arange(9); remap[right_ids] = 9 + np.arange(3)
+    right = lo.faces[~np.isin(lo.faces, [0, 3, 6]).any(1)]
+    faces = np.concatenate([left, remap[right]])
+    from mi_displace.bake.meshdata import MeshData
+
+    low = MeshData(pos, faces, uvs)
+    rng = np.random.default_rng(1)
+    disp = rng.uniform(0, 0.1, (32, 32)).astype(np.float32)   # twins read different texels
+    out = restore(low, {"displacement": disp}, levels=2)
+    w = weld_ids(out.positions)
+    assert len(np.unique(w)) < len(out.positions)               # seam twins exist ...
+    same = np.unique(weld_ids(np.round(out.positions[:, :2], 5)), return_counts=True)[1]
+    assert (same > 1).sum() == (len(out.positions) - len(np.unique(w)))  # ... and coincide in 3-D
+
+
+def test_holes_stay_open(variant):
+    low = plane(n=4)
+    valid = np.ones((32, 32), np.float32)
+    valid[8:24, 8:24] = 0
+    full = restore(low, {"displacement": np.zeros((32, 32), np.float32)}, levels=2)
+    holed = restore(low, {"displacement": np.zeros((32, 32), np.float32), "valid": valid}, levels=2)
+    assert len(holed.faces) < 0.85 * len(full.faces)   # a quarter of the area is void
+    centroid = holed.positions[holed.faces].mean(1)
+    assert not np.any((np.abs(centroid[:, 0] - 0.5) < 0.2) & (np.abs(centroid[:, 1] - 0.5) < 0.2))
+
+
+def test_bad_restore_input(tmp_path, variant):
+    with pytest.raises(ValueError, match="levels"):
+        edge_splits(9, None)
+    with pytest.raises(ValueError, match="split"):
+        edge_splits(None, 0)
+    with pytest.raises(ValueError, match="no UVs"):
+        restore(plane(uv=False), {"displacement": np.zeros((4, 4), np.float32)})
+    with pytest.raises(ValueError, match="NaN"):
+        restore(plane(), {"displacement": np.full((4, 4), np.nan, np.float32)})
+    with pytest.raises(FileNotFoundError):
+        restore(plane(), tmp_path / "none.png")
+
+
+def test_cli_bake_restore_meshdiff(sphere_pair, tmp_path, capsys):
+    from mi_displace.bake.meshdata import save_obj
+
+    high, low = sphere_pair
+    save_obj(tmp_path / "high.obj", high.positions, high.faces)
+    save_obj(tmp_path / "low_in.obj", low.positions, low.faces, low.uvs)
+    assert main(["bake", "--high", str(tmp_path / "high.obj"), "--low", str(tmp_path / "low_in.obj"),
+                 "--res", "64", "--out", str(tmp_path / "b"), "--formats", "d16,float",
+                 "--diagnostics"]) == 0
+    rec = json.loads((tmp_path / "b" / "bake.json").read_text())
+    assert rec["settings"]["width"] == 64 and rec["counts"]["covered"] > 0
+    assert (tmp_path / "b" / "diagnostics.png").is_file()
+    assert main(["restore", "--map", str(tmp_path / "b" / "d16.png"), "--levels", "2",
+                 "--out", str(tmp_path / "r.ply")]) == 0
+    capsys.readouterr()
+    assert main(["meshdiff", str(tmp_path / "high.obj"), str(tmp_path / "r.ply"),
+                 "--samples", "20000", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    for key in ("rms", "hausdorff", "rms_rel", "hausdorff_rel", "hausdorff_ab", "hausdorff_ba"):
+        assert np.isfinite(d[key])
+    assert d["hausdorff_rel"] < 0.01
+    with pytest.raises(SystemExit) as e:
+        main(["restore", "--map", str(tmp_path / "b" / "nothing.png"), "--out", str(tmp_path / "x.ply")])
+    assert e.value.code == 2
