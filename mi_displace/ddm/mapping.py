@@ -208,8 +208,10 @@ def map_tiles(evaluator, placement: Placement, buffers: TileBuffers, affine, hei
     vp = gather(mi.Vector3f, tp, k)
     vn = gather(mi.Vector3f, tn, k)
     offset = gather(mi.Point2f, placement.offsets, inst)
-    (a00, a01), (a10, a11) = affine[0]
-    b0, b1 = affine[1]
+    # per-frame scalars as opaque variables: one compiled kernel serves every frame
+    (a00, a01), (a10, a11) = (tuple(dr.opaque(mi.Float, x) for x in row) for row in affine[0])
+    b0, b1 = (dr.opaque(mi.Float, x) for x in affine[1])
+    height, w_offset = dr.opaque(mi.Float, height), dr.opaque(mi.Float, w_offset)
     su, sv = placement.size
 
     def place(p):

@@ -150,3 +150,24 @@ def test_texture_space_animation_translates_tiles(variant):
     assert np.allclose(du[:, 0], 0.5 * m.layout.size[0], atol=1e-6) and np.allclose(du[:, 1], 0)
     z = np.tile(m.tiles[0].positions[:, 2], m.layout.count)
     assert np.allclose(_np(p1)[:, 2], 0.1 * 1.5 * z, atol=1e-5)   # sin(2 pi 0.25) = 1
+
+
+def test_multi_tile_layouts_map_each_instance_with_its_own_tile(variant):
+    m = _model(base="plane", tile="thorn,hexagon,stone:4", layout="random", seed=3, tiles_u=5,
+               tiles_v=4, height=0.3, mode="maps", map_resolution=4)
+    assert len(m.placement.groups) == 3
+    p, _, _ = m.map()
+    P = _np(p)
+    su, sv = m.layout.size
+    order = np.argsort(m.layout.tile_index, kind="stable")   # instances grouped by tile
+    start = 0
+    for i in order:
+        tile = m.tiles[m.layout.tile_index[i]].positions
+        u0, v0 = m.layout.offsets[i]
+        expect = np.stack([2 * (u0 + su * tile[:, 0]) - 1, 2 * (v0 + sv * tile[:, 1]) - 1,
+                           0.3 * tile[:, 2]], 1)
+        assert np.allclose(P[start:start + len(tile)], expect, atol=1e-5)
+        start += len(tile)
+    assert start == m.vertex_count
+    faces = np.stack([np.asarray(c) for c in m.faces], 1)
+    assert faces.max() == m.vertex_count - 1 and len(faces) == m.face_count
