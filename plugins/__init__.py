@@ -19,6 +19,7 @@ PLUGIN_MODULES = [
     "mi_displace.plugins.vdm_mesh",
     "mi_displace.plugins.horizon",
     "mi_displace.plugins.relief",
+    "mi_displace.plugins.restored",
 ]
 
 _registered_for: str | None = None
