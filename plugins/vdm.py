@@ -34,7 +34,7 @@ import numpy as np
 
 from mi_displace.core.texture_height import check_texture_finite
 from mi_displace.vdm import build, table
-from mi_displace.vdm.lookup import VDMLookup
+from mi_displace.vdm.lookup import cached_lookup
 from mi_displace.vdm.steps import VDMSteps
 
 
@@ -287,7 +287,7 @@ class VDM(MesostructureBSDF):
                              c_range=(lo, hi), theta_oversample=self.spec.theta_oversample)
         heights = table.sample_heights(self.height, spec.res, self.tiling)
         self.data = build.build(heights, spec, use_cache=self.use_cache)
-        lookup = VDMLookup(self.data, self.svd_terms, self.mvm_terms)
+        lookup = cached_lookup(self.data, self.svd_terms, self.mvm_terms)
         self.steps = VDMSteps(lookup, self.height, spec.depth, tile_size, self.tiling,
                               use_curvature, self.shadows, self.shadow_bias,
                               self.shadow_slack)

@@ -38,7 +38,9 @@ from mi_displace.vdm.steps import KDIAG, KOFF
 
 
 def _columns(v) -> np.ndarray:
-    return np.stack([np.asarray(c) for c in v], 1)
+    """(N, k) NumPy array of a Dr.Jit vector (scalar-literal components broadcast)."""
+    n = dr.width(v)
+    return np.stack([np.broadcast_to(np.asarray(c), (n,)) for c in v], 1)
 
 
 def base_geometry(props: mi.Properties):

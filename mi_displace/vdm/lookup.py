@@ -20,6 +20,27 @@ import numpy as np
 from mi_displace.vdm.build import VDMData
 
 
+#: In-memory cache of lookups by (table key, svd_terms, mvm_terms, variant), most recent
+#: last.  Reusing the very same texture buffers across scene loads keeps the traced
+#: kernels identical, so Dr.Jit's kernel cache hits instead of recompiling per load.
+_CACHE: dict = {}
+CACHE_ENTRIES = 4
+
+
+def cached_lookup(data: VDMData, svd_terms: int, mvm_terms: int) -> "VDMLookup":
+    """A :class:`VDMLookup` for ``data``, shared with earlier loads of the same table."""
+    key = (data.stats.get("key"), int(svd_terms), int(mvm_terms), mi.variant())
+    if key[0] is None:
+        return VDMLookup(data, svd_terms, mvm_terms)
+    hit = _CACHE.pop(key, None)
+    if hit is None:
+        hit = VDMLookup(data, svd_terms, mvm_terms)
+    _CACHE[key] = hit
+    while len(_CACHE) > CACHE_ENTRIES:
+        _CACHE.pop(next(iter(_CACHE)))
+    return hit
+
+
 class VDMLookup:
     """Textures of one built table at the given term counts (svd_terms, mvm_terms)."""
 

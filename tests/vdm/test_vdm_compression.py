@@ -1,0 +1,62 @@
+"""SVD compression with shared weights (§3.3) against NumPy's SVD and direct residuals."""
+import numpy as np
+import pytest
+
+from mi_displace.vdm import build, compression
+
+
+def test_low_rank_is_exact_and_matches_numpy_svd():
+    rng = np.random.default_rng(0)
+    A = (rng.random((5000, 4)) @ rng.random((4, 30))).astype(np.float32)
+    comp = compression.compress(A, 24, 8)
+    rec = comp.reconstruct(4, 4)
+    np.testing.assert_allclose(rec, A, atol=2e-4 * np.abs(A).max())
+    s = np.linalg.svd(A.astype(np.float64), compute_uv=False)
+    np.testing.assert_allclose(np.sqrt(comp.eigvals[:4]), s[:4], rtol=1e-4)
+    # shared weights: W = A E, columns orthogonal with norms lambda
+    wtw = comp.weights.T.astype(np.float64) @ comp.weights
+    np.testing.assert_allclose(np.diag(wtw)[:4], comp.eigvals[:4], rtol=1e-3)
+
+
+def test_gram_chunks_match_direct(monkeypatch):
+    rng = np.random.default_rng(1)
+    A = rng.random((1000, 7)).astype(np.float32)
+    monkeypatch.setattr(compression, "CHUNK_ROWS", 64)
+    np.testing.assert_allclose(compression.gram(A), A.astype(np.float64).T @ A, rtol=1e-5)
+
+
+def test_rmse_formula_and_silhouettes_on_a_built_table(variant, tmp_path, monkeypatch):
+    monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
+    u = (np.arange(16) + 0.5) / 16
+    heights = (0.5 + 0.5 * np.sin(2 * np.pi * u)[None, :] * np.sin(4 * np.pi * u)[:, None]).astype(np.float32)
+    spec = build.VDMSpec(res=16, n_theta=8, n_phi=8, n_curv=4, depth=0.2, c_range=(-1.0, 2.0))
+    data = build.build(heights, spec, use_cache=False)
+    comp = data.compressed
+    # direct residual with the full A rebuilt from all stored terms is impossible (k_stored
+    # < columns), so compare against the eigen formula evaluated on a reconstruction of all
+    # terms: A = W_all E^T; recompute W_all from the eigvecs via the reconstruction identity
+    nv = comp.n_vdm_cols
+    full_terms = comp.k_stored
+    for k in (1, 4, 8):
+        rv, rm = data.reconstruction_rmse(k, min(k, 4))
+        rv_all, rm_all = data.reconstruction_rmse(full_terms, full_terms)
+        assert rv >= rv_all - 1e-9 and rm >= rm_all - 1e-9
+    # direct check: residual between k-term and 16-term reconstructions equals the formula
+    # difference (orthogonality of the weight columns)
+    a16 = comp.reconstruct(16, 16)
+    a8 = comp.reconstruct(8, 4)
+    direct_v = np.sqrt(np.mean((a16[:, :nv] - a8[:, :nv]) ** 2))
+    lam, ev = comp.eigvals, comp.eigvecs
+    formula_v = np.sqrt(np.sum(lam[8:16] * np.sum(ev[:nv, 8:16] ** 2, 0)) / (data.n_rows * nv))
+    np.testing.assert_allclose(direct_v, formula_v, rtol=1e-2)
+    assert 0 <= data.silhouette_mismatch(4) < 0.05
+    assert data.silhouette_mismatch(16) <= data.silhouette_mismatch(1)
+    assert data.table_bytes() > comp.nbytes(8, 4)
+
+
+def test_term_counts_are_checked():
+    comp = compression.compress(np.ones((10, 5), np.float32), 4, 3)
+    with pytest.raises(ValueError, match="svd_terms"):
+        comp.eigen_functions(4, 1)
+    with pytest.raises(ValueError, match="mvm_terms"):
+        comp.eigen_functions(1, 0)
