@@ -4,7 +4,8 @@ methods, and the image trade-off over ``map_resolution`` against the path tracer
 * :func:`geometric_accuracy` — the same tiles mapped by DDM (exact S, n; ``jacobian``
   normals as the truth) and by HDDM at each map resolution: RMS and max vertex distance
   relative to the bounding-box diagonal, mean / max normal angle error [degrees].
-* :func:`normal_methods` — ``tangent`` / ``naive`` against ``jacobian`` on ``exact``.
+* :func:`normal_methods` — ``tangent`` / ``naive`` against ``jacobian`` on ``exact``;
+  :func:`epsilon_sweep` — the tangent points' ε against the same truth.
 * :func:`image_sweep` — a comparison scene's reference (``exact``, ``path``) once, then
   the approximation (``maps``, ``raster``) at each resolution: FLIP and warm wall time,
   beside the reference's own FLIP against spp and time.
@@ -73,6 +74,27 @@ def normal_methods(cfg: DDMConfig) -> list[dict]:
         ang = np.asarray(nrm.angle_error_deg(n, truth))
         rows.append({"method": method, "mean_deg": float(ang.mean()),
                      "p99_deg": float(np.percentile(ang, 99)), "max_deg": float(ang.max())})
+    return rows
+
+
+def epsilon_sweep(cfg: DDMConfig, epsilons=(1e-5, 1e-4, 1e-3, 1e-2, 1e-1)) -> list[dict]:
+    """Angle error [degrees] of ``tangent`` normals against ``jacobian`` per ε (tile units),
+    on ``exact`` and on ``maps`` (at ``cfg.map_resolution``): too small an ε loses float32
+    precision after the mapping, too large an ε bends across the tile / map texels."""
+    cfg.mode = "exact"
+    model = DDMModel(cfg)
+    _, truth, _ = model.map(method="jacobian")
+    maps = mapping.MapsEvaluator(base_maps.build_maps(model.base, cfg.map_resolution))
+    _, truth_maps, _ = model.map(method="jacobian", evaluator=maps)
+    rows = []
+    for eps in epsilons:
+        model.cfg.epsilon = eps
+        row = {"epsilon": eps}
+        for name, ev, ref in (("exact", None, truth), ("maps", maps, truth_maps)):
+            _, n, _ = model.map(method="tangent", evaluator=ev)
+            ang = np.asarray(nrm.angle_error_deg(n, ref))
+            row[f"{name}_mean_deg"], row[f"{name}_max_deg"] = float(ang.mean()), float(ang.max())
+        rows.append(row)
     return rows
 
 
@@ -181,11 +203,12 @@ def write_figures(out_dir, scene_path, quick: bool = False) -> dict:
     res = RESOLUTIONS[:3] if quick else RESOLUTIONS
     acc = geometric_accuracy(DDMConfig(**THORNS_SPHERE), res)
     methods = normal_methods(DDMConfig(**THORNS_SPHERE))
+    eps = epsilon_sweep(DDMConfig(**THORNS_SPHERE))
     sweep = image_sweep(scene_path, resolutions=(16, 32, 64) if quick else (16, 32, 64, 128, 256, 512),
                         reference_spp=64 if quick else 1024, path_spp=(4, 16) if quick else (4, 16, 64, 256))
     _plot_accuracy(acc, out / "ddm_accuracy.png")
     _plot_sweep(sweep, out / "ddm_sweep.png")
-    record = {"accuracy": acc, "normal_methods": methods, "sweep": sweep,
+    record = {"accuracy": acc, "normal_methods": methods, "epsilon": eps, "sweep": sweep,
               "variant": mi.variant()}
     (out / "ddm_figures.json").write_text(json.dumps(record, indent=2))
     md = ("## maps vs exact\n\n" + _markdown(acc, [
@@ -195,6 +218,11 @@ def write_figures(out_dir, scene_path, quick: bool = False) -> dict:
         + "\n## normal methods vs jacobian (exact)\n\n" + _markdown(methods, [
             ("method", "method", "s"), ("mean (deg)", "mean_deg", ".3g"),
             ("p99 (deg)", "p99_deg", ".3g"), ("max (deg)", "max_deg", ".3g")])
+        + "\n## tangent normals against jacobian per epsilon (tile units; maps at 256)\n\n"
+        + _markdown(eps, [("epsilon", "epsilon", "g"), ("exact mean (deg)", "exact_mean_deg", ".3g"),
+                          ("exact max (deg)", "exact_max_deg", ".3g"),
+                          ("maps mean (deg)", "maps_mean_deg", ".3g"),
+                          ("maps max (deg)", "maps_max_deg", ".3g")])
         + "\n## image sweep\n\n" + _markdown(sweep["approximation"], [
             ("map_resolution", "map_resolution", "d"), ("FLIP", "flip", ".4f"),
             ("time (s)", "time_s", ".3f")])
