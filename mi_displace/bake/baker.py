@@ -28,7 +28,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.bake import diagnostics, formats, padding, unwrap
+from mi_displace.bake import diagnostics as diag
+from mi_displace.bake import formats, padding, unwrap
 from mi_displace.bake.meshdata import (MeshData, check_mesh, load_mesh, save_obj, tangent_frame,
                                        uv_triangle_stats)
 from mi_displace.bake.trace import AMBIGUOUS, EMPTY, HighPoly, LowPolyDevice, OK, trace
@@ -163,7 +164,8 @@ class Baker:
                 "direction_tangent": (7, 3), "status": (10, 1), "back_depth": (11, 1)}
 
     def run(self, width: int, height: int, aa: int, max_distance: float, delta: float,
-            dual_depth: bool, conservative: bool = True) -> tuple[np.ndarray, dict]:
+            dual_depth: bool, conservative: bool = True,
+            continuation: bool = False) -> tuple[np.ndarray, dict]:
         """Bake all texels.
 
         Returns:
@@ -181,7 +183,8 @@ class Baker:
             s = rasterize_rows(self.layout, W, H, row0, n_rows, aa, conservative)
             conservative_samples += s.conservative
             dr.scatter(tri_hit, 1, s.prim)
-            r = trace(self.high_dev, self.low_dev, s.prim, s.b1, s.b2, max_distance, delta, dual_depth)
+            r = trace(self.high_dev, self.low_dev, s.prim, s.b1, s.b2, max_distance, delta,
+                      dual_depth, continuation)
             block = _texel_average(r, s.texel, n_rows * W, aa, max_distance, C)
             out[row0:row0 + n_rows] = block.reshape(n_rows, W, C)
         ores = min(max(width, height), OVERLAP_RESOLUTION)
@@ -241,7 +244,7 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, C: int):
 
 
 def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: float | None = None,
-         pad: float = 8, map_formats=formats.DEFAULT_FORMATS, diagnostics_image: bool = False,
+         pad: float = 8, map_formats=formats.DEFAULT_FORMATS, diagnostics: bool = False,
          cage=None, cage_offset: float | None = None, target_faces: int = 5000,
          smoothing_iterations: int = 10, conservative: bool = True,
          min_hit_fraction: float = 0.5, delta: float | None = None) -> BakeResult:
@@ -260,7 +263,8 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
         pad: edge padding radius [texels]; texels that missed the high-poly are filled
             from their nearest hit texel within the same radius.
         map_formats: names from :data:`formats.FORMATS`.
-        diagnostics_image: also write ``diagnostics.png`` (status colours).
+        diagnostics: diagnostics mode (§3.1): one more ray per sample looks for a second
+            crossing beyond the hit (overhangs), and ``diagnostics.png`` is written.
         cage / cage_offset: cage mesh (the low-poly's topology) or an offset along the
             vertex normals [object units]; rays then run from the cage through the low-poly.
         min_hit_fraction: fewest covered texels that must find the high-poly; below it the
@@ -280,7 +284,7 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
     timings["accel_s"] = time.perf_counter() - start
     start = time.perf_counter()
     image, extra = baker.run(width, height, aa, max_distance, delta,
-                             "dual_d8_n16" in map_formats, conservative)
+                             "dual_d8_n16" in map_formats, conservative, diagnostics)
     timings["raster_trace_s"] = time.perf_counter() - start
     status = image[..., Baker.CHANNELS["status"][0]].astype(np.uint8)
     covered = status != EMPTY
@@ -296,7 +300,7 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
     maps = split_channels(image)
     maps["valid"] = valid
     timings["bake_s"] = timings["accel_s"] + timings["raster_trace_s"] + timings["padding_s"]
-    count = diagnostics.counts(status)
+    count = diag.counts(status)
     n_cov = int(covered.sum())
     hits = count["ok"] + count["ambiguous"]
     if uv_stats["uv_degenerate_triangles"] or extra["uv_overlap_texels"]:
@@ -317,6 +321,7 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
                      "delta": delta, "padding": pad, "formats": list(map_formats),
                      "cage": None if cage is None else str(cage) if not isinstance(cage, MeshData) else cage.name,
                      "cage_offset": cage_offset, "conservative": conservative,
+                     "diagnostics": diagnostics,
                      "variant": mi.variant()},
         "counts": {**count, "covered": n_cov, "padded": int(filled.sum() - n_cov), **extra},
         "displacement_range": [float(maps["displacement"][covered].min()) if n_cov else 0.0,
@@ -325,7 +330,7 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
     }
     result = BakeResult(maps, status, covered, low, record)
     if out_dir is not None:
-        write_outputs(result, Path(out_dir), map_formats, diagnostics_image)
+        write_outputs(result, Path(out_dir), map_formats, diagnostics)
     timings["total_s"] = time.perf_counter() - t0
     if out_dir is not None:
         (Path(out_dir) / "bake.json").write_text(json.dumps(record, indent=2))
@@ -355,7 +360,7 @@ def write_outputs(result: BakeResult, out_dir: Path, map_formats, diagnostics_im
     files = [str(formats.write_map(out_dir, f, result.maps, meta).name) for f in map_formats]
     files.append("valid.png")
     if diagnostics_image:
-        formats.write_png_raw(out_dir / "diagnostics.png", diagnostics.image(result.status))
+        formats.write_png_raw(out_dir / "diagnostics.png", diag.image(result.status))
         files.append("diagnostics.png")
     result.record["files"] = ["low.obj"] + files
     result.record["timings"]["write_s"] = time.perf_counter() - start

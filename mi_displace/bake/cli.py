@@ -42,7 +42,7 @@ def add_commands(sub) -> dict:
                    help="largest |displacement| searched, object units (default 10%% of the diagonal)")
     p.add_argument("--padding", type=float, default=8, help="edge padding in texels (default 8)")
     p.add_argument("--formats", default=None, help="comma-separated map formats (default: all)")
-    p.add_argument("--diagnostics", action="store_true", help="write diagnostics.png")
+    p.add_argument("--diagnostics", action="store_true", help="diagnostics mode: overhang rays and diagnostics.png")
     p.add_argument("--cage", default=None, help="cage mesh with the low-poly's topology (Fig. 8)")
     p.add_argument("--cage-offset", type=_positive_float, default=None,
                    help="cage = low-poly pushed out along its normals by this distance")
@@ -73,7 +73,7 @@ def _cmd_bake(args) -> int:
         warnings.simplefilter("always")
         result = bake(args.high, args.low, res=args.res, out_dir=args.out, aa=args.aa,
                       max_distance=args.max_distance, pad=args.padding, map_formats=fmts,
-                      diagnostics_image=args.diagnostics, cage=args.cage,
+                      diagnostics=args.diagnostics, cage=args.cage,
                       cage_offset=args.cage_offset, target_faces=args.target_faces,
                       smoothing_iterations=args.smoothing)
     for w in caught:

@@ -15,7 +15,9 @@ Mitsuba's acceleration structure:
   different crossings, the normal line leaves the high-poly twice within +-max_distance (a
   fold or overhang; a thin shell's far wall is back-facing and does not count): the
   projection is ambiguous (height-field assumption broken, §3.1), flagged ``ambiguous`` (the
-  value of the rule above is still written).
+  value of the rule above is still written).  Diagnostics mode adds a continuation ray from
+  the chosen hit away from the low-poly: another crossing within range (an overhang above
+  the hit) is ``ambiguous`` too.
 * **cage mode** (Fig. 8: rays along directions set by a transformed copy of the low-poly) — a
   cage with the low-poly's topology; the ray leaves the interpolated cage point q towards p and
   runs until ``max_distance`` past p.  The displacement is measured along that direction
@@ -143,8 +145,13 @@ def _hit(scene, o, d, maxt):
 
 
 def trace(high: HighPoly, low: LowPolyDevice, prim, b1, b2, max_distance: float,
-          delta: float, dual_depth: bool = False) -> TraceResult:
-    """Trace the samples (see the module docstring); all arguments per sample."""
+          delta: float, dual_depth: bool = False, continuation: bool = False) -> TraceResult:
+    """Trace the samples (see the module docstring); all arguments per sample.
+
+    ``continuation`` (diagnostics mode) traces one more ray from the chosen hit onward, away
+    from the low-poly, to the end of the ``max_distance`` range: a second crossing there
+    (an overhang above the hit) also marks the texel ``ambiguous``.
+    """
     p, n_raw, t, b, q = low.interpolate(prim, b1, b2)
     n = dr.normalize(n_raw)
     dr.eval(p, n, n_raw, t, b, q)  # shared by every ray kernel below
@@ -175,6 +182,11 @@ def trace(high: HighPoly, low: LowPolyDevice, prim, b1, b2, max_distance: float,
         nxt = _hit(high.scene, q + dirn * (pc.t + delta), dirn, span + max_distance - pc.t - delta)
         ambiguous = found & nxt.is_valid()
         direction = -dirn
+    if continuation and q is None:  # diagnostics: does the line cross the high-poly again?
+        beyond_hit = p + direction * (d + dr.select(d >= 0, delta, -delta))
+        sgn = dr.select(d >= 0, 1.0, -1.0)
+        again = _hit(high.scene, beyond_hit, direction * sgn, dr.maximum(max_distance - dr.abs(d) - delta, 0.0))
+        ambiguous |= found & front & again.is_valid() & (max_distance - dr.abs(d) > 2 * delta)
     u32 = mi.UInt32
     status = dr.select(found, dr.select(front, dr.select(ambiguous, u32(AMBIGUOUS), u32(OK)),
                                         u32(BACKFACE)), u32(MISS))
