@@ -29,6 +29,20 @@ CLAIMS = {"bump": "-/-/-", "horizon": "X/-/-", "relief": "X/X/-", "approximation
           "reference": "X/X/X"}
 
 
+#: Scene parameters used only by some modes (Mitsuba refuses a parameter a scene does not
+#: use): ``resolution`` by the reference, ``coarse`` by every coarse-mesh mode, the table
+#: knobs by the VDM approximation.  Everything else (``res``, ``spp``) goes to all modes.
+MODE_PARAMS = {"resolution": ("reference",),
+               "coarse": ("approximation", "bump", "horizon", "relief", "base"),
+               "vdm_res": ("approximation",), "svd_terms": ("approximation",),
+               "mvm_terms": ("approximation",)}
+
+
+def params_for(mode: str, params: dict | None) -> dict:
+    """The subset of ``params`` that the scene uses in ``mode`` (:data:`MODE_PARAMS`)."""
+    return {k: v for k, v in (params or {}).items() if mode in MODE_PARAMS.get(k, (mode,))}
+
+
 def _memory(stats: list[dict]) -> int:
     total = 0
     for s in stats:
@@ -41,7 +55,8 @@ def _timed(path, params, mode, repeats):
     builds, renders = [], []
     image, scene, timings = None, None, None
     for _ in range(repeats + 1):
-        scene, timings = scenes.load(path, **params, mode=mode, integrator="raster")
+        scene, timings = scenes.load(path, **params_for(mode, params), mode=mode,
+                                     integrator="raster")
         image, seconds = scenes.render(scene)
         builds.append(timings["build_s"])
         renders.append(seconds)
@@ -69,8 +84,10 @@ def methods_table(scene_path: str | Path, params: dict | None = None, repeats: i
         raise ValueError(f"repeats: must be >= 1, got {repeats}")
     params = dict(params or {})
     ref, ref_build, ref_render, ref_stats, ref_scene = _timed(scene_path, params, "reference", repeats)
-    base_scene, _ = scenes.load(scene_path, **params, mode="base", integrator="raster")
-    approx_scene, _ = scenes.load(scene_path, **params, mode="approximation", integrator="raster")
+    base_scene, _ = scenes.load(scene_path, **params_for("base", params), mode="base",
+                                integrator="raster")
+    approx_scene, _ = scenes.load(scene_path, **params_for("approximation", params),
+                                  mode="approximation", integrator="raster")
     bsdf = approx_scene.shapes()[0].bsdf()
     shift = occlusion_fraction * bsdf.stats["depth_tile"]
     masks = geometry_masks(ref_scene, base_scene, bsdf.tiling, shift)

@@ -1,0 +1,87 @@
+"""Horizon mapping, relief mapping and the geometry masks against independent truth."""
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mi_displace.vdm import horizon, relief
+from mi_displace.vdm.frame import TiledHeight
+
+
+def _brute_horizon(heights, D, x, y, phi, max_distance):
+    """Second implementation: dense NumPy march with bilinear periodic lookups."""
+    res = heights.shape[0]
+    r = np.arange(1, int(max_distance * res * 8) + 1) / (res * 8)
+    px, py = x + r * math.cos(phi), y + r * math.sin(phi)
+    gx, gy = px * res - 0.5, py * res - 0.5
+    i0, j0 = np.floor(gx).astype(int), np.floor(gy).astype(int)
+    fx, fy = gx - i0, gy - j0
+    h = lambda i, j: heights[j % res, i % res]
+    hb = ((1 - fx) * (1 - fy) * h(i0, j0) + fx * (1 - fy) * h(i0 + 1, j0)
+          + (1 - fx) * fy * h(i0, j0 + 1) + fx * fy * h(i0 + 1, j0 + 1))
+    z0 = -D * (1 - heights[int(y * res), int(x * res)])
+    return max(0.0, float(np.max(np.arctan2(-D * (1 - hb) - z0, r))))
+
+
+def test_horizon_table(variant):
+    res, D = 16, 0.2
+    np.testing.assert_allclose(horizon.horizon_table(np.full((res, res), 0.3, np.float32), D, 8), 0, atol=1e-5)
+    u = (np.arange(res) + 0.5) / res
+    heights = (0.5 + 0.5 * np.sin(2 * np.pi * u)[None, :] * np.cos(2 * np.pi * u)[:, None]).astype(np.float32)
+    tab = horizon.horizon_table(heights, D, 8, max_distance=0.5)
+    assert np.all(np.isfinite(tab)) and tab.min() >= 0 and tab.max() < math.pi / 2
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        k, j, i = rng.integers(8), rng.integers(res), rng.integers(res)
+        ref = _brute_horizon(heights, D, (i + 0.5) / res, (j + 0.5) / res, 2 * math.pi * k / 8, 0.5)
+        assert abs(tab[k, j, i] - ref) < 0.05, (k, j, i, tab[k, j, i], ref)
+
+
+def _constant_texture(value):
+    return mi.load_dict({"type": "bitmap", "bitmap": mi.Bitmap(np.full((2, 2, 1), value, np.float32)),
+                         "raw": True})
+
+
+def test_relief_march_on_a_constant_floor(variant):
+    """H constant: the ray meets the plane z = -D(1-H) at T - D(1-H) tan(theta) u."""
+    H, D, n = 0.4, 0.3, 64
+    height = TiledHeight(_constant_texture(H), (1.0, 1.0), 1e-3)
+    theta = mi.Float(np.linspace(0.0, 1.3, n))
+    phi = mi.Float(np.linspace(0.0, 6.0, n))
+    T = mi.Point2f(0.3, 0.6)
+    direction = mi.Vector2f(dr.cos(phi), dr.sin(phi))
+    T2, depth = relief.march_view(height, T, dr.cos(theta), direction, D, 32, 10)
+    h0 = D * (1 - H)
+    np.testing.assert_allclose(np.asarray(depth), h0, atol=D / 32 / 2**10 * 2)
+    off = h0 * np.tan(np.linspace(0.0, 1.3, n))
+    np.testing.assert_allclose(np.asarray(T2.x), 0.3 - off * np.cos(np.linspace(0, 6, n)), atol=1e-3)
+    # a constant floor casts no shadow on itself
+    shadow = relief.march_shadow(height, T2, depth, dr.cos(theta), direction, D, 16)
+    assert not np.any(np.asarray(shadow))
+
+
+@pytest.mark.parametrize("plugin", ["horizon", "relief"])
+def test_baseline_plugins_depth_zero_and_bad_input(variant, plugin):
+    mat = {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.6}}
+
+    def scene(bsdf):
+        return mi.load_dict({
+            "type": "scene", "integrator": {"type": "raster"},
+            "sensor": {"type": "perspective", "to_world": mi.ScalarTransform4f().look_at(
+                origin=[0, -4, 1], target=[0, 0, 0], up=[0, 0, 1]),
+                "film": {"type": "hdrfilm", "width": 32, "height": 32}},
+            "key": {"type": "point", "position": [3, -2, 2], "intensity": {"type": "rgb", "value": 20}},
+            "shape": {"type": "vdm_mesh", "base": "sphere", "resolution": 24, "bsdf": bsdf}})
+
+    bsdf = {"type": plugin, "height": {"type": "cells", "cells": 2}, "depth": 0.0,
+            "tiling_u": 8, "tiling_v": 4, "nested": mat}
+    a = np.asarray(mi.render(scene(bsdf)))
+    b = np.asarray(mi.render(scene(mat)))
+    np.testing.assert_allclose(a, b, atol=1e-5)
+    bsdf["depth"] = 0.1
+    c = np.asarray(mi.render(scene(bsdf)))
+    assert np.all(np.isfinite(c)) and np.abs(c - b).max() > 0.01
+    with pytest.raises(Exception, match="depth"):
+        scene(dict(bsdf, depth=-1.0))
