@@ -64,16 +64,19 @@ class HighPoly:
 
     def __init__(self, high: MeshData):
         V, F = len(high.positions), len(high.faces)
-        mesh = mi.Mesh("high_poly", V, F, has_vertex_normals=False, has_vertex_texcoords=False)
+        mesh = mi.Mesh("high_poly", V, F, has_vertex_normals=True, has_vertex_texcoords=False)
         params = mi.traverse(mesh)
         params["vertex_positions"] = mi.Float(np.ascontiguousarray(high.positions.ravel()))
         params["faces"] = mi.UInt32(np.ascontiguousarray(high.faces.astype(np.uint32).ravel()))
         params.update()
+        mesh.recompute_vertex_normals()   # Mitsuba's own (area/angle-weighted), on the device
         self.scene = mi.load_dict({"type": "scene", "high": mesh})
         p = high.positions.astype(np.float64)
         fn = np.cross(p[high.faces[:, 1]] - p[high.faces[:, 0]], p[high.faces[:, 2]] - p[high.faces[:, 0]])
         self.face_normals = _vec(fn)
-        self.vertex_normals = _vec(high.normals())
+        vn = mi.traverse(mesh)["vertex_normals"]
+        self.vertex_normals = mi.Vector3f(*(dr.gather(mi.Float, vn, dr.arange(mi.UInt32, V) * 3 + k)
+                                            for k in range(3)))
         self.faces = mi.Vector3u(*[mi.UInt32(high.faces[:, k].astype(np.uint32)) for k in range(3)])
 
     def shading_normal(self, prim: mi.UInt32, b1: mi.Float, b2: mi.Float,

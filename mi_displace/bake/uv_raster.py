@@ -150,7 +150,7 @@ def _clamped_barycentrics(layout: UVLayout, tri: mi.UInt32, p: mi.Point2f):
     return dr.select(ok, w1 / total, 1.0 / 3.0), dr.select(ok, w2 / total, 1.0 / 3.0)
 
 
-OVERLAP_RESOLUTION = 512
+OVERLAP_RESOLUTION = 256
 OVERLAP_EPSILON = 1e-4  # barycentric margin: points on shared edges are not overlaps
 
 
@@ -159,7 +159,7 @@ def overlap_texels(layout: UVLayout, res: int) -> int:
 
     The ray from above hits the highest stacked triangle, the ray from below the lowest; a
     difference means overlap.  It is a property of the layout, measured once per bake at
-    ``min(res, OVERLAP_RESOLUTION)`` (so it costs 2 x 512^2 rays at most).
+    ``min(res, OVERLAP_RESOLUTION)`` (so it costs 2 x 256^2 rays at most).
     """
     idx = dr.arange(mi.UInt32, res * res)
     u = (mi.Float(idx % res) + 0.5) / res

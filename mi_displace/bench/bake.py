@@ -116,6 +116,25 @@ def restoration_and_compression(high, low) -> tuple[dict, list[dict]]:
     return meshdiff, rows
 
 
+def restoration_sweep(high, low) -> list[dict]:
+    """Restoration error against map resolution and subdivision levels (16-bit maps)."""
+    from mi_displace.bake.baker import bake
+    from mi_displace.bake.restore import restore
+    from mi_displace.evaluate.metrics import mesh_distance
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for res in (256, 512, 1024, 2048):
+            bake(high, low, res=res, out_dir=tmp, map_formats=["d16"])
+            for levels in (1, 2, 3):
+                r = restore(Path(tmp) / "low.obj", Path(tmp) / "d16.png", levels=levels)
+                d = mesh_distance((high.positions, high.faces), (r.positions, r.faces), samples=50_000)
+                rows.append({"res": res, "levels": levels, "faces": int(len(r.faces)),
+                             "restore_s": r.seconds, "hausdorff_rel": d["hausdorff_rel"],
+                             "rms_rel": d["rms_rel"]})
+    return rows
+
+
 def multistep_example(res: int = 512) -> dict:
     """One map vs two maps on the leaning-horn sphere (see the module docstring)."""
     from mi_displace.bake.baker import bake
@@ -172,6 +191,7 @@ def run() -> dict:
     with _TimingLock():
         table = timing_table(high, low, max_distance, delta)
     multistep = multistep_example()
+    sweep = restoration_sweep(high, low)
     meshdiff, comp = restoration_and_compression(high, low)
     row2048 = next(r for r in table if r["res"] == 2048 and r["aa"] == 1)
     png16 = next(r for r in comp if r["codec"] == "png16")
@@ -182,6 +202,7 @@ def run() -> dict:
         "restore_hausdorff_rel": meshdiff["hausdorff_rel"], "restore_rms_rel": meshdiff["rms_rel"],
         "compression_ratio": png16["ratio"],
         "timing_table": table, "compression": comp, "meshdiff": meshdiff, "multistep": multistep,
+        "restoration_sweep": sweep,
         "targets": {"bake_time_warm_s": 1.5, "speedup_vs_naive": 3.0, "restore_hausdorff_rel": 0.005},
     }
     FIGURES.mkdir(parents=True, exist_ok=True)
@@ -189,17 +210,18 @@ def run() -> dict:
     (FIGURES / "bake_compression.json").write_text(_json.dumps(comp, indent=2))
     (FIGURES / "bake_multistep.json").write_text(_json.dumps(multistep, indent=2))
     (FIGURES / "bake_bench.json").write_text(_json.dumps(record, indent=2))
-    _plot(table, comp)
+    (FIGURES / "bake_restore_error.json").write_text(_json.dumps(sweep, indent=2))
+    _plot(table, comp, sweep)
     return record
 
 
-def _plot(table, comp) -> None:
+def _plot(table, comp, sweep) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4))
     for aa in (1, 2):
         rows = [r for r in table if r["aa"] == aa]
         ax[0].plot([r["res"] for r in rows], [r["ours_s"] for r in rows], "o-", label=f"ours, aa {aa}")
@@ -213,6 +235,16 @@ def _plot(table, comp) -> None:
     ax[1].set(xlabel="compression ratio (original / (low + map + mask))",
               ylabel="Hausdorff [% of diagonal]", title="restoration at 1024^2, 2 levels")
     ax[1].legend()
+    for levels in (1, 2, 3):
+        rows = [r for r in sweep if r["levels"] == levels]
+        ax[2].plot([r["res"] for r in rows], [r["hausdorff_rel"] * 100 for r in rows], "o-",
+                   label=f"Hausdorff, {levels} levels")
+        ax[2].plot([r["res"] for r in rows], [r["rms_rel"] * 100 for r in rows], "s--",
+                   label=f"RMS, {levels} levels")
+    ax[2].axhline(0.5, color="grey", lw=0.8)
+    ax[2].set(xscale="log", yscale="log", xlabel="map side [texels]", ylabel="% of diagonal",
+              title="restoration error (16-bit map)")
+    ax[2].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(FIGURES / "bake_bench.png", dpi=100)
     plt.close(fig)
