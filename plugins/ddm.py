@@ -32,11 +32,18 @@ import numpy as np
 from mi_displace.ddm.animation import Animation
 from mi_displace.ddm.model import BASE_PARAMS, DDMConfig, DDMModel
 
-FLOAT_KEYS = ("gap_u", "gap_v", "w_offset", "u0", "v0", "height", "epsilon", "time")
-INT_KEYS = ("tiles_u", "tiles_v", "seed", "map_resolution", "clamp_resolution")
+FLOAT_KEYS = ("gap_u", "gap_v", "w_offset", "u0", "v0", "height", "epsilon", "time", "tolerance")
+INT_KEYS = ("tiles_u", "tiles_v", "seed", "clamp_resolution")
 STRING_KEYS = ("base", "filename", "tile", "tile_target", "layout", "mode", "normals")
 ANIMATION_KEYS = ("velocity_u", "velocity_v", "rotation_rate", "w_amplitude", "w_frequency",
                   "alpha0", "alpha_rate")
+
+
+def _int(value, name: str) -> int:
+    try:
+        return int(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"ddm: '{name}' must be an integer or 'auto', got {value!r}") from None
 
 
 def config_from_props(props: mi.Properties) -> DDMConfig:
@@ -51,6 +58,9 @@ def config_from_props(props: mi.Properties) -> DDMConfig:
     for key in INT_KEYS:
         if key in props:
             setattr(cfg, key, int(props.get(key)))
+    if "map_resolution" in props:   # an integer, or the string "auto"
+        value = props.get("map_resolution")
+        cfg.map_resolution = "auto" if str(value).strip() == "auto" else _int(value, "map_resolution")
     cfg.base_params = {k: float(props.get(k)) for k in BASE_PARAMS.get(cfg.base, ()) if k in props}
     cfg.animation = Animation(**{k: float(props.get(k)) for k in ANIMATION_KEYS if k in props})
     return cfg

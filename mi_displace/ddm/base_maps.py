@@ -16,6 +16,7 @@ of any base whose normal is degenerate (zero length, NaN) are invalid too.
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -280,3 +281,71 @@ def prune(layout, bounds: np.ndarray, maps: GeometryImage):
     count = sat[z_v + 1, z_u + 1] - sat[a_v, z_u + 1] - sat[z_v + 1, a_u] + sat[a_v, a_u]
     keep = count > 0
     return layout.subset(keep), int((~keep).sum())
+
+
+def map_error(base, maps: GeometryImage, w_max: float, samples: int = 1 << 16, seed: int = 0) -> float:
+    """Largest error of the mapped point T = P + N w against S + n w (object units) at the
+    cell centres of ``maps`` (where bilinear interpolation errs most) and at ``samples``
+    seeded random (u, v), over w in {0, w_max}; points in invalid texels are skipped."""
+    ru, rv = maps.ru, maps.rv
+    i = dr.arange(mi.UInt32, ru * rv)
+    su = ru if maps.periodic_u else max(ru - 1, 1)
+    sv = rv if maps.periodic_v else max(rv - 1, 1)
+    cu = dr.minimum((mi.Float(i % ru) + 0.5) / su, 1.0)
+    cv = dr.minimum((mi.Float(i // ru) + 0.5) / sv, 1.0)
+    rng = np.random.default_rng(seed)
+    u = np.concatenate([np.asarray(cu), rng.random(samples)])
+    v = np.concatenate([np.asarray(cv), rng.random(samples)])
+    keep = np.ones(len(u), bool)      # all four texels of the lookup valid (clamps excluded)
+    for du in (-0.5 / su, 0.5 / su):
+        for dv in (-0.5 / sv, 0.5 / sv):
+            keep &= maps.texel_valid(u + du, v + dv)
+    u, v = mi.Float(u[keep].astype(np.float32)), mi.Float(v[keep].astype(np.float32))
+    s = base.sample(u, v)
+    p, n = maps.lookup(u, v)
+    d0 = dr.norm(p - s.p)
+    d1 = dr.norm(p + n * w_max - (s.p + s.n * w_max))
+    return float(dr.max(dr.maximum(d0, d1))[0])
+
+
+AUTO_MAX_RESOLUTION = 2048
+
+
+def choose_resolution(base, tolerance: float, w_max: float, start: int = 32) -> tuple[int, list]:
+    """The smallest power-of-two ``map_resolution`` whose mapped points stay within
+    ``tolerance`` x (bounding-box diagonal of the base) of the exact ones (:func:`map_error`).
+
+    Bilinear geometry images err as 1/R^2 (measured, docs/ddm.md), so one measurement at
+    ``start`` predicts R; the prediction is checked, doubled until it holds (at most
+    :data:`AUTO_MAX_RESOLUTION`, which is returned if even that misses) and halved while
+    the half still holds.
+
+    Returns:
+        ``(resolution, trials)`` with trials = [(R, relative error), ...].
+    """
+    if not (math.isfinite(tolerance) and tolerance > 0):
+        raise ValueError(f"ddm: 'tolerance' must be a positive number, got {tolerance!r}")
+    diagonal = base_sample_diagonal(base)
+    trials = {}
+
+    def error(r: int) -> float:
+        if r not in trials:
+            trials[r] = map_error(base, build_maps(base, r), w_max) / diagonal
+        return trials[r]
+
+    r = start
+    if error(r) > tolerance:
+        predicted = r * math.sqrt(error(r) / tolerance)
+        r = min(AUTO_MAX_RESOLUTION, 2 ** math.ceil(math.log2(predicted)))
+        while error(r) > tolerance and r < AUTO_MAX_RESOLUTION:
+            r *= 2
+    while r > 2 and error(r // 2) <= tolerance:
+        r //= 2
+    return r, sorted(trials.items())
+
+
+def base_sample_diagonal(base, n: int = 64) -> float:
+    """Bounding-box diagonal of the base, from an n x n sample (object units)."""
+    u, v = texel_coordinates(n, n, False, False)
+    p = np.stack([np.asarray(c) for c in base.sample(u, v).p], 1)
+    return float(np.linalg.norm(p.max(0) - p.min(0)))

@@ -84,7 +84,8 @@ class DDMConfig:
     seed: int = 0
     height: float = 0.1                 # [object units per unit tile z]
     mode: str = "maps"
-    map_resolution: int = 256
+    map_resolution: int | str = 256     # or "auto": smallest R meeting 'tolerance'
+    tolerance: float = 1e-4             # auto: max mapped-point error / base diagonal
     clamp_resolution: int = 512         # mesh bases, exact mode: nearest-valid clamp map
     normals: str = "tangent"
     epsilon: float = 1e-3               # [tile units]
@@ -101,7 +102,10 @@ class DDMConfig:
                 raise ValueError(f"ddm: '{key}' must be finite, got {getattr(self, key)!r}")
         if not 0 < self.epsilon < 0.5:
             raise ValueError(f"ddm: 'epsilon' must lie in (0, 0.5) tile units, got {self.epsilon!r}")
-        base_maps.check_resolution(self.map_resolution)
+        if self.map_resolution != "auto":
+            base_maps.check_resolution(self.map_resolution)
+        if not (math.isfinite(self.tolerance) and self.tolerance > 0):
+            raise ValueError(f"ddm: 'tolerance' must be a positive number, got {self.tolerance!r}")
         if self.base not in BASE_PARAMS and self.base != "mesh":
             raise ValueError(f"ddm: unknown 'base' {self.base!r}; expected one of "
                              f"{', '.join(sorted(BASE_PARAMS))} or 'mesh'")
@@ -141,6 +145,14 @@ class DDMModel:
             cfg.base, cfg.filename, cfg.clamp_resolution, **cfg.base_params)
         self._warn_folding()
         self.maps = None
+        self.auto_trials = None
+        if cfg.map_resolution == "auto":
+            if not self._all_valid_base():
+                raise ValueError("ddm: map_resolution 'auto' needs an analytic or Bezier base: on a "
+                                 "mesh the bilinear lookup across UV-chart borders does not "
+                                 "converge with R; give an integer map_resolution")
+            cfg.map_resolution, self.auto_trials = base_maps.choose_resolution(
+                self.base, cfg.tolerance, self._w_max())
         need_maps = cfg.mode == "maps" or not self._all_valid_base()
         if need_maps:
             self.maps = base_maps.build_maps(self.base, cfg.map_resolution)
@@ -170,11 +182,15 @@ class DDMModel:
 
         return not isinstance(self.base, MeshBase)
 
-    def _warn_folding(self) -> None:
-        """Warn when w exceeds the radius of curvature 1/kappa (the map T folds)."""
+    def _w_max(self) -> float:
+        """Largest |w| any tile vertex reaches (object units), animation included."""
         z = np.concatenate([t.positions[:, 2] for t in self.tiles])
         h = self.cfg.height * (1 + abs(self.cfg.animation.w_amplitude))
-        w_max = max(abs(h * z.max() + self.cfg.w_offset), abs(h * z.min() + self.cfg.w_offset))
+        return max(abs(h * z.max() + self.cfg.w_offset), abs(h * z.min() + self.cfg.w_offset))
+
+    def _warn_folding(self) -> None:
+        """Warn when w exceeds the radius of curvature 1/kappa (the map T folds)."""
+        w_max = self._w_max()
         k_lo, k_hi = self.base.curvature_bounds()
         kappa = max(abs(k_lo), abs(k_hi))
         if kappa > 0 and w_max * kappa >= 1:
@@ -229,4 +245,6 @@ class DDMModel:
              **self.memory_report()}
         if self.maps is not None:
             s.update(map_resolution=self.maps.ru, **self.maps.stats)
+        if self.auto_trials is not None:
+            s["auto_trials"] = [[r, e] for r, e in self.auto_trials]
         return s

@@ -127,3 +127,15 @@ def test_pruning_counts_tiles_without_valid_texels(variant):
     small = np.array([[0.4, 0.4, 0.6, 0.6]])   # a tile covering only its cell's centre
     _, pruned_small = base_maps.prune(lay, small, maps)
     assert pruned_small == 4 * 4
+
+
+def test_auto_resolution_meets_the_tolerance_with_the_smallest_power_of_two(variant):
+    base = make_base("torus", major_radius=1.0, minor_radius=0.4)
+    r, trials = base_maps.choose_resolution(base, 2e-4, 0.1)
+    errors = dict(trials)
+    assert errors[r] <= 2e-4 and errors[r // 2] > 2e-4
+    # independent check: the error of a freshly built map at r, against the exact base
+    diag = base_maps.base_sample_diagonal(base)
+    assert base_maps.map_error(base, base_maps.build_maps(base, r), 0.1, seed=9) / diag <= 2e-4
+    with pytest.raises(ValueError, match="tolerance"):
+        base_maps.choose_resolution(base, 0.0, 0.1)

@@ -104,3 +104,14 @@ def test_missing_files_are_named(variant, tmp_path):
         ddm(tile=str(tmp_path / "missing.ply"))
     with pytest.raises(Exception, match="nothing.obj"):
         ddm(base="mesh", filename=str(tmp_path / "nothing.obj"))
+
+
+def test_auto_map_resolution(variant):
+    s = ddm(base="sphere", tile="stone", tiles_u=8, tiles_v=4, map_resolution="auto",
+            tolerance=1e-3, height=0.1)
+    assert s.build_stats["map_resolution"] == 64 and len(s.build_stats["auto_trials"]) >= 2
+    with pytest.raises(Exception, match="auto"):
+        ddm(base="mesh", filename=str(SCENES.parent / "data" / "spot" / "spot_triangulated.obj"),
+            map_resolution="auto")
+    with pytest.raises(Exception, match="map_resolution"):
+        ddm(map_resolution="fine")
