@@ -171,3 +171,25 @@ def test_multi_tile_layouts_map_each_instance_with_its_own_tile(variant):
     assert start == m.vertex_count
     faces = np.stack([np.asarray(c) for c in m.faces], 1)
     assert faces.max() == m.vertex_count - 1 and len(faces) == m.face_count
+
+
+def test_zero_height_reproduces_the_base(variant):
+    for mode, tol in (("exact", 2e-6), ("maps", 5e-4)):
+        m = _model(base="sphere", base_params={"radius": 2.0}, tile="thorn", tiles_u=16,
+                   tiles_v=8, height=0.0, mode=mode, map_resolution=128)
+        p, n, _ = m.map()
+        r = np.linalg.norm(_np(p), axis=1)
+        assert np.abs(r - 2.0).max() < tol * 2.0, mode
+        assert np.all(np.isfinite(_np(n)))
+
+
+@pytest.mark.parametrize("radius", [1e-3, 1e3])
+def test_extreme_scales_stay_finite_and_relative(variant, radius):
+    m = _model(base="sphere", base_params={"radius": radius}, tile="hexagon", layout="hex",
+               tiles_u=12, tiles_v=8, height=0.05 * radius, mode="maps", map_resolution=64)
+    p, n, _ = m.map(method="jacobian")
+    P = _np(p)
+    assert np.all(np.isfinite(P)) and np.allclose(np.linalg.norm(_np(n), axis=1), 1, atol=1e-4)
+    z = np.tile(m.tiles[0].positions[:, 2], m.layout.count)
+    rel = np.linalg.norm(P, axis=1) / radius - (1 + 0.05 * z)
+    assert np.abs(rel).max() < 2e-3          # same relative accuracy at every scale

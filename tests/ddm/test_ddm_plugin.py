@@ -115,3 +115,13 @@ def test_auto_map_resolution(variant):
             map_resolution="auto")
     with pytest.raises(Exception, match="map_resolution"):
         ddm(map_resolution="fine")
+
+
+def test_far_from_the_origin_in_float32(variant):
+    far = buffers(ddm(base="torus", tile="stone", tiles_u=12, tiles_v=6, height=0.05,
+                      to_world=mi.ScalarTransform4f().translate([1e4, -2e4, 5e3])))
+    near = buffers(ddm(base="torus", tile="stone", tiles_u=12, tiles_v=6, height=0.05))
+    assert np.all(np.isfinite(far[0])) and np.array_equal(far[1], near[1])
+    # float32 spacing at 2e4 is ~2e-3: the shape survives to that precision
+    assert np.abs(far[0] - [1e4, -2e4, 5e3] - near[0]).max() < 4e-3
+    assert np.allclose(far[2], near[2], atol=1e-5)
