@@ -190,6 +190,39 @@ def _plot_sweep(sweep: dict, path: Path) -> None:
     fig.savefig(path, dpi=120)
 
 
+def plot_geometry_images(path: Path, resolution: int = 256) -> dict:
+    """The paper's Fig. 3 and Fig. 5: P (bounding box -> RGB) and N (n / 2 + 1/2) of the
+    teapot body and of Spot (invalid texels darkened before, shown filled after §4.1)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from mi_displace.ddm.model import make_base
+
+    spot = str(Path(__file__).resolve().parents[2] / "data" / "spot" / "spot_triangulated.obj")
+    fig = Figure(figsize=(9, 4.8))
+    FigureCanvasAgg(fig)
+    info = {}
+    for row, (name, base) in enumerate((("teapot body", make_base("teapot")),
+                                        ("Spot", make_base("mesh", spot)))):
+        maps = base_maps.build_maps(base, resolution)
+        shape = (maps.rv, maps.ru, 3)
+        p = _np3(maps.position).reshape(shape)
+        n = _np3(maps.normal).reshape(shape)
+        p = (p - p.min((0, 1))) / np.maximum(np.ptp(p, (0, 1)), 1e-12)
+        shown = [p * np.where(maps.valid, 1.0, 0.25)[..., None], p,
+                 (n * 0.5 + 0.5) * np.where(maps.valid, 1.0, 0.25)[..., None], n * 0.5 + 0.5]
+        titles = ["P (invalid dark)", "P filled (§4.1)", "N (invalid dark)", "N filled"]
+        for col, (img, title) in enumerate(zip(shown, titles)):
+            ax = fig.add_subplot(2, 4, row * 4 + col + 1)
+            ax.imshow(np.clip(img, 0, 1), origin="lower", interpolation="nearest")
+            ax.set_title(f"{name}: {title}", fontsize=7)
+            ax.set_axis_off()
+        info[name] = maps.stats
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    return info
+
+
 def _markdown(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
     head = "| " + " | ".join(c[0] for c in columns) + " |\n|" + "---|" * len(columns) + "\n"
     return head + "".join("| " + " | ".join(format(r[c[1]], c[2]) for c in columns) + " |\n"
@@ -208,6 +241,7 @@ def write_figures(out_dir, scene_path, quick: bool = False) -> dict:
                         reference_spp=64 if quick else 1024, path_spp=(4, 16) if quick else (4, 16, 64, 256))
     _plot_accuracy(acc, out / "ddm_accuracy.png")
     _plot_sweep(sweep, out / "ddm_sweep.png")
+    plot_geometry_images(out / "ddm_maps.png")
     record = {"accuracy": acc, "normal_methods": methods, "epsilon": eps, "sweep": sweep,
               "variant": mi.variant()}
     (out / "ddm_figures.json").write_text(json.dumps(record, indent=2))
