@@ -14,8 +14,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mi_displace.ddm.tiles import HEX_ASPECT
-
 LAYOUTS = ("rect", "hex", "alternate", "random")
 
 
@@ -64,7 +62,8 @@ def make_layout(kind: str, tiles_u: int, tiles_v: int, n_tiles: int = 1, gap_u: 
     Args:
         kind: ``rect`` (n x m cells, tile k = 0), ``hex`` (rows of pointy-top hexagons
             at pitch 1/m, odd rows shifted by half a cell; a tile's v extent is 4/3 of the
-            row pitch so that the hexagons interlock), ``alternate`` (semi-regular: tile (i + j) mod
+            row pitch so that the hexagons interlock; they are regular on the surface when
+            m = (2 / sqrt 3) n extent_v / extent_u), ``alternate`` (semi-regular: tile (i + j) mod
             ``n_tiles``, or ``pattern[j % rows][i % cols]``), ``random`` (seeded uniform
             choice among ``n_tiles``).
         tiles_u, tiles_v: cells along u and v (n, m).
@@ -108,8 +107,3 @@ def make_layout(kind: str, tiles_u: int, tiles_v: int, n_tiles: int = 1, gap_u: 
         index = np.zeros(len(i), np.int64)
     offsets = np.stack([ou + u0, ov + v0], 1)
     return Layout(offsets, index.astype(np.int64), (su, sv), (n, m))
-
-
-def hex_cell_aspect() -> float:
-    """v/u extent ratio of the hexagon tile (pointy-top), for choosing tiles_v."""
-    return float(HEX_ASPECT)

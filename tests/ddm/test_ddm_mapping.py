@@ -1,8 +1,6 @@
 """The DDM / HDDM mapping (eq. 1-2), the normal methods (§3.2) and the extremes."""
 import warnings
 
-import drjit as dr
-import mitsuba as mi
 import numpy as np
 import pytest
 

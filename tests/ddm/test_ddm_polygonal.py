@@ -1,8 +1,6 @@
 """HDDM over a polygonal base (§4.1): Spot's UV layout rasterised, filled, pruned, clamped."""
 from pathlib import Path
 
-import drjit as dr
-import mitsuba as mi
 import numpy as np
 import pytest
 import trimesh

@@ -1,0 +1,34 @@
+"""The ddm sub-commands of mi-displace."""
+import json
+from pathlib import Path
+
+import pytest
+
+from mi_displace import cli
+
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+
+
+def test_ddm_animate_writes_frames(variant_llvm, tmp_path):
+    rc = cli.main(["ddm-animate", str(SCENES / "ddm_teapot_morph.xml"), "--shape", "morph",
+                   "-D", "mode=approximation", "-D", "integrator=raster", "-D", "res=24",
+                   "--frames", "2", "--duration", "0.5", "--out", str(tmp_path)])
+    assert rc == 0 and sorted(p.name for p in tmp_path.iterdir()) == ["frame_0000.png",
+                                                                      "frame_0001.png"]
+
+
+def test_ddm_animate_bad_shape_id(variant_llvm, tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        cli.main(["ddm-animate", str(SCENES / "ddm_teapot_morph.xml"), "--shape", "nope",
+                  "-D", "res=16", "--out", str(tmp_path)])
+    assert e.value.code == 2 and "nope" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_ddm_figures_quick(variant_llvm, tmp_path):
+    assert cli.main(["ddm-figures", "--quick", "--out", str(tmp_path)]) == 0
+    for name in ("ddm_accuracy.png", "ddm_sweep.png", "ddm_maps.png", "ddm_figures.md"):
+        assert (tmp_path / name).is_file()
+    record = json.loads((tmp_path / "ddm_figures.json").read_text())
+    rms = [r["rms_error_rel"] for r in record["accuracy"]]
+    assert rms == sorted(rms, reverse=True)
