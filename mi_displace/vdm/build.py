@@ -117,7 +117,8 @@ class VDMData:
         wrong = 0
         for start in range(0, self.n_rows, compression.CHUNK_ROWS):  # row chunks
             rows = slice(start, start + compression.CHUNK_ROWS)
-            rec = c.weights[rows, :e_mvm.shape[1]] @ e_mvm.T
+            with compression.single_threaded_blas():
+                rec = c.weights[rows, :e_mvm.shape[1]] @ e_mvm.T
             full = self.mvm_full[rows]
             wrong += int(np.count_nonzero((thetas[None, None, :] > full[..., None])
                                           != (thetas[None, None, :] > rec[..., None])))

@@ -12,11 +12,49 @@ products, float64 sums) so the 524k x 144 matrix is never copied to float64.
 """
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import glob
+import os
 from dataclasses import dataclass
 
 import numpy as np
 
-CHUNK_ROWS = 1 << 16
+CHUNK_ROWS = 1 << 18
+
+
+def _openblas():
+    """NumPy's bundled OpenBLAS (ctypes handle) or None."""
+    folder = os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs")
+    for path in glob.glob(os.path.join(folder, "libscipy_openblas*.so*")):
+        try:
+            lib = ctypes.CDLL(path)
+            lib.scipy_openblas_get_num_threads64_.restype = ctypes.c_int
+            return lib
+        except (OSError, AttributeError):
+            continue
+    return None
+
+
+@contextlib.contextmanager
+def single_threaded_blas():
+    """Run NumPy's BLAS on one thread inside the block (restored afterwards).
+
+    On a shared 2-core machine a multi-threaded OpenBLAS GEMM next to Dr.Jit's worker
+    threads (or other processes) was measured to swing from 0.1 s to 10 s; one thread is
+    0.1-0.4 s for the 524k x 144 Gram matrix, every time.  Without the bundled OpenBLAS
+    (other NumPy builds) this does nothing.
+    """
+    lib = _openblas()
+    if lib is None:
+        yield
+        return
+    old = lib.scipy_openblas_get_num_threads64_()
+    lib.scipy_openblas_set_num_threads64_(1)
+    try:
+        yield
+    finally:
+        lib.scipy_openblas_set_num_threads64_(old)
 
 
 @dataclass
@@ -89,12 +127,15 @@ def compress(A: np.ndarray, n_vdm_cols: int, k_stored: int) -> Compressed:
     """
     if not np.all(np.isfinite(A)):
         raise ValueError("vdm: the table to compress holds NaN/Inf entries")
-    vals, vecs = np.linalg.eigh(gram(A))
+    with single_threaded_blas():
+        g = gram(A)
+    vals, vecs = np.linalg.eigh(g)
     order = np.argsort(vals)[::-1]
     vals, vecs = np.maximum(vals[order], 0.0), vecs[:, order]
     # a deterministic sign per eigen-function (the largest |entry| positive)
     signs = np.sign(vecs[np.argmax(np.abs(vecs), axis=0), np.arange(vecs.shape[1])])
     vecs = vecs * np.where(signs == 0, 1.0, signs)
     k = min(k_stored, A.shape[1])
-    weights = (A @ vecs[:, :k].astype(np.float32)).astype(np.float32)
+    with single_threaded_blas():
+        weights = (A @ vecs[:, :k].astype(np.float32)).astype(np.float32)
     return Compressed(weights=weights, eigvecs=vecs, eigvals=vals, n_vdm_cols=n_vdm_cols)

@@ -11,6 +11,7 @@ memory (table bytes; mesh bytes for the reference).
 """
 from __future__ import annotations
 
+import gc
 import statistics
 from pathlib import Path
 
@@ -55,6 +56,10 @@ def _timed(path, params, mode, repeats):
     builds, renders = [], []
     image, scene, timings = None, None, None
     for _ in range(repeats + 1):
+        # free the previous scene first: its plugin instances would otherwise stay
+        # registered and change the traced kernels (a recompilation per load)
+        scene = None
+        gc.collect()
         scene, timings = scenes.load(path, **params_for(mode, params), mode=mode,
                                      integrator="raster")
         image, seconds = scenes.render(scene)

@@ -1,0 +1,125 @@
+"""`mi-displace bench vdm`: VDM table build, compression, render speed and accuracy.
+
+All on ``scenes/vdm_torus.xml`` (torus R = 1, r = 0.4, cells height field, depth 0.06):
+
+* ``build_time_s``: the full 128^2 x 32 x 8 x 16 table built from scratch (ray casting +
+  curvature resampling + MVM + SVD), warm (second build in this process; the first is
+  ``build_time_cold_s``), beside ``reference_build_s`` (tessellating the displaced torus
+  and Mitsuba's acceleration build over it) measured in the same process;
+* ``table_mb`` / ``compressed_mb`` / ``compression_ratio`` (float32, 8 + 4 terms),
+  ``reconstruction_rmse`` (VDM, tile units) and ``reconstruction_rmse_mvm`` (rad) against
+  the full table, ``silhouette_mismatch`` (fraction of samples whose silhouette test flips);
+* ``render_time_warm_s``: raster, 512 x 512, one sample per pixel, warm median, beside
+  ``reference_render_time_s`` (the same integrator on the true displacement) and
+  ``base_render_time_s`` (the coarse torus with the plain material);
+* ``flip_vs_reference`` and the measured Table 1 (``methods``): every method against the
+  true displacement (raster, 256 x 256, 4 x 4 samples) in the shadow / occlusion /
+  silhouette masks (:mod:`mi_displace.vdm.methods`).
+"""
+from __future__ import annotations
+
+import gc
+import json as _json
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+
+SCENE = Path(__file__).resolve().parents[2] / "scenes" / "vdm_torus.xml"
+TARGETS = {"build_time_s": 10.0, "render_time_warm_s": 0.3, "compression_ratio": 10.0}
+
+
+def _median_render(scene, repeats=5) -> float:
+    from mi_displace.render import raster
+
+    sensor = scene.sensors()[0]
+    times = []
+    for _ in range(repeats + 1):
+        dr.sync_thread()
+        start = time.perf_counter()
+        img = raster.render(scene, sensor, aa=1)
+        dr.eval(img)
+        dr.sync_thread()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times[1:])
+
+
+def run() -> dict:
+    from mi_displace.render import scene as scenes
+    from mi_displace.vdm import build, methods, table
+
+    approx, _ = scenes.load(SCENE, mode="approximation", integrator="raster", res=512)
+    bsdf = approx.shapes()[0].bsdf()
+    spec = bsdf.data.spec
+    heights = table.sample_heights(bsdf.height, spec.res, bsdf.tiling)
+    builds = []
+    for _ in range(2):
+        start = time.perf_counter()
+        data = build.build(heights, spec, use_cache=False)
+        builds.append(time.perf_counter() - start)
+    rmse_vdm, rmse_mvm = data.reconstruction_rmse(8, 4)
+    table_b, comp_b = data.table_bytes(), data.compressed.nbytes(8, 4)
+
+    render_s = _median_render(approx)
+    start = time.perf_counter()
+    ref, _ = scenes.load(SCENE, mode="reference", integrator="raster", res=512)
+    ref_build = time.perf_counter() - start
+    ref_render = _median_render(ref)
+    del ref
+    gc.collect()
+    base, _ = scenes.load(SCENE, mode="base", integrator="raster", res=512)
+    base_render = _median_render(base)
+    del base, approx
+    gc.collect()
+
+    result = methods.methods_table(SCENE, {"res": "256"}, repeats=1)
+    rows = result["rows"]
+    vdm_row = next(r for r in rows if r["method"] == "approximation")
+    return {
+        "variant": mi.variant(),
+        "table_sizes": {"res": spec.res, "phi": spec.n_phi, "theta": spec.n_theta,
+                        "curvatures": spec.n_curv},
+        "curvature_range_tile": list(map(float, spec.c_range)),
+        "build_time_s": builds[1], "build_time_cold_s": builds[0],
+        "build_stages_s": {k: data.stats[k] for k in ("cast_s", "resample_s", "svd_s")},
+        "reference_build_s": ref_build, "build_vs_reference_build": builds[1] / ref_build,
+        "table_mb": table_b / 1e6, "compressed_mb": comp_b / 1e6,
+        "compression_ratio": table_b / comp_b,
+        "reconstruction_rmse": rmse_vdm, "reconstruction_rmse_mvm": rmse_mvm,
+        "silhouette_mismatch": data.silhouette_mismatch(4),
+        "render_time_warm_s": render_s, "reference_render_time_s": ref_render,
+        "base_render_time_s": base_render, "render_speedup_vs_reference": ref_render / render_s,
+        "flip_vs_reference": vdm_row["flip"],
+        "methods": [{k: v for k, v in r.items()} for r in rows],
+        "mask_pixels": result["mask_pixels"],
+        "targets": TARGETS,
+    }
+
+
+def main(json: bool = False) -> dict:
+    # a private table cache, so that the bench never reads a stale one
+    with tempfile.TemporaryDirectory() as tmp:
+        old = os.environ.get("MI_DISPLACE_CACHE")
+        os.environ["MI_DISPLACE_CACHE"] = tmp
+        try:
+            record = run()
+        finally:
+            if old is None:
+                del os.environ["MI_DISPLACE_CACHE"]
+            else:
+                os.environ["MI_DISPLACE_CACHE"] = old
+    if json:
+        print(_json.dumps(record, indent=2))
+    else:
+        from mi_displace.vdm.methods import markdown
+
+        for key, value in record.items():
+            if key == "methods":
+                print(markdown(value))
+            else:
+                print(f"{key:>28}: {value:.4g}" if isinstance(value, float) else f"{key:>28}: {value}")
+    return record
