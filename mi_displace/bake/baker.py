@@ -35,9 +35,8 @@ from mi_displace.bake.meshdata import (MeshData, check_mesh, load_mesh, save_obj
 from mi_displace.bake.trace import AMBIGUOUS, EMPTY, HighPoly, LowPolyDevice, OK, trace
 from mi_displace.bake.uv_raster import (OVERLAP_RESOLUTION, UVLayout, overlap_texels,
                                         rasterize_rows)
-from mi_displace.core.tessellate import scatter_add
 
-CHUNK_SAMPLES = 1 << 22        # samples per block of rows (bounds device memory)
+CHUNK_SAMPLES = 1 << 20        # samples per block of rows (bounds device memory)
 BYTES_PER_TEXEL = 160          # host: maps, status, padding transform and encoded copies
 BYTES_PER_SAMPLE = 240         # device: samples, rays, intersections, interpolated frame
 MAX_RESOLUTION = 16384

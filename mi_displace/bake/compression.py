@@ -14,7 +14,6 @@ The validity mask (PNG, 1 bit of information per texel) is counted with every ma
 """
 from __future__ import annotations
 
-import io
 import lzma
 import tempfile
 from pathlib import Path

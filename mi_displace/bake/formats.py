@@ -140,9 +140,7 @@ def write_map(out_dir: Path, fmt: str, maps: dict, meta: dict) -> Path:
         q, scale = _quantise(d, offset, span, bits)
         side["displacement"] = {"offset": offset, "scale": scale, "bits": bits}
         hi, lo = (q >> 8).astype(np.uint8), (q & 255).astype(np.uint8)
-        if fmt == "d8":
-            data = q
-        elif fmt == "d16":
+        if fmt in ("d8", "d16"):
             data = q
         elif fmt == "dir24_d8":
             data = np.dstack([_unit8(dirn), q])

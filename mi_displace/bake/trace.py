@@ -12,7 +12,8 @@ Mitsuba's acceleration structure:
   there (dot(face normal, n) > 0): the surface the ray is meant to measure.  The nearest
   front-facing hit of the two rays wins (ties go outward); only if neither ray has one does
   the nearest back-facing hit count, flagged ``backface``.  When both rays hit front-facing faces at
-  different crossings, the normal line leaves the high-poly twice within +-max_distance (a
+  different crossings (outside diagnostics mode the inward ray stops at the outward front
+  hit's distance, so only folds nearer than that are seen), the normal line leaves the high-poly twice within +-max_distance (a
   fold or overhang; a thin shell's far wall is back-facing and does not count): the
   projection is ambiguous (height-field assumption broken, §3.1), flagged ``ambiguous`` (the
   value of the rule above is still written).  Diagnostics mode adds a continuation ray from
@@ -160,10 +161,18 @@ def trace(high: HighPoly, low: LowPolyDevice, prim, b1, b2, max_distance: float,
     dr.eval(p, n, n_raw, t, b, q)  # shared by every ray kernel below
     if q is None:
         pa = _hit(high.scene, p - delta * n, n, max_distance + delta)
-        pb = _hit(high.scene, p + delta * n, -n, max_distance + delta)
-        va, vb = pa.is_valid(), pb.is_valid()
-        da, db = pa.t - delta, -(pb.t - delta)
-        fa, fb = high.facing(pa.prim_index, n, va), high.facing(pb.prim_index, n, vb)
+        va = pa.is_valid()
+        fa = high.facing(pa.prim_index, n, va)
+        da = pa.t - delta
+        # the inward ray only needs to beat a front hit outward (shorter rays traverse less);
+        # diagnostics mode searches the whole range, to count every fold
+        reach = max_distance + delta
+        if not continuation:
+            reach = dr.select(fa, dr.minimum(pa.t + delta, reach), reach)
+        pb = _hit(high.scene, p + delta * n, -n, reach)
+        vb = pb.is_valid()
+        db = -(pb.t - delta)
+        fb = high.facing(pb.prim_index, n, vb)
         pick_a = dr.select(fa | fb, fa & (~fb | (dr.abs(da) <= dr.abs(db))),
                            va & (~vb | (dr.abs(da) <= dr.abs(db))))
         found = va | vb

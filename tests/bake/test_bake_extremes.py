@@ -41,10 +41,21 @@ def test_back_faces_are_not_measured(variant):
 
 def test_ambiguous_projection_is_flagged(variant):
     low = plane(n=2)
-    high = _stack(plane(z=0.01, n=4), plane(z=-0.03, n=4))   # two front-facing layers: a fold
+    high = _stack(plane(z=0.03, n=4), plane(z=-0.01, n=4))   # two front-facing layers: a fold
     r = bake(high, low, res=8, max_distance=0.1, pad=0)
     assert r.record["counts"]["ambiguous"] == 64
-    assert np.allclose(r.maps["displacement"], 0.01, atol=1e-5)   # nearest one kept
+    assert np.allclose(r.maps["displacement"], -0.01, atol=1e-5)   # nearest one kept
+    # the farther layer inward is seen by the full-range search of diagnostics mode only
+    high = _stack(plane(z=0.01, n=4), plane(z=-0.03, n=4))
+    assert bake(high, low, res=8, max_distance=0.1, pad=0).record["counts"]["ambiguous"] == 0
+    r = bake(high, low, res=8, max_distance=0.1, pad=0, diagnostics=True)
+    assert r.record["counts"]["ambiguous"] == 64
+    assert np.allclose(r.maps["displacement"], 0.01, atol=1e-5)
+    # an overhang above the hit (a second crossing outward) needs the continuation ray
+    high = _stack(plane(z=0.01, n=4), plane(z=0.05, n=4, flip=True), plane(z=0.07, n=4))
+    assert bake(high, low, res=8, max_distance=0.1, pad=0).record["counts"]["ambiguous"] == 0
+    assert bake(high, low, res=8, max_distance=0.1, pad=0,
+                diagnostics=True).record["counts"]["ambiguous"] == 64
 
 
 def test_concave_crease_crossing_normals(variant):
