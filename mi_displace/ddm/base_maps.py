@@ -179,6 +179,24 @@ class GeometryImage:
 
         return p, n, (d_du(ps), d_dv(ps), d_du(ns), d_dv(ns))
 
+    def clamped_count(self, u: mi.Float, v: mi.Float) -> int:
+        """How many of the points (u, v) fall in an invalid texel (nearest texel), i.e. are
+        clamped to the nearest valid value by the filled maps (§4.1).  Dr.Jit."""
+        if self.valid.all():
+            return 0
+        mask = mi.Bool(np.ascontiguousarray(self.valid.ravel()))
+
+        def nearest(x, r, periodic):
+            if r == 1:
+                return dr.zeros(mi.UInt32, dr.width(x))
+            if periodic:
+                k = mi.Int32(dr.round(x * r))
+                return mi.UInt32(k - r * mi.Int32(dr.floor(mi.Float(k) / r)))
+            return mi.UInt32(dr.round(dr.clip(x, 0.0, 1.0) * (r - 1)))
+
+        k = nearest(v, self.rv, self.periodic_v) * self.ru + nearest(u, self.ru, self.periodic_u)
+        return int(dr.count(~dr.gather(mi.Bool, mask, k))[0])
+
     def texel_valid(self, u, v) -> np.ndarray:
         """Validity of the nearest texel to each (u, v) (NumPy bool)."""
         uu, vv = np.asarray(u, np.float64), np.asarray(v, np.float64)

@@ -139,3 +139,12 @@ def test_auto_resolution_meets_the_tolerance_with_the_smallest_power_of_two(vari
     assert base_maps.map_error(base, base_maps.build_maps(base, r), 0.1, seed=9) / diag <= 2e-4
     with pytest.raises(ValueError, match="tolerance"):
         base_maps.choose_resolution(base, 0.0, 0.1)
+
+
+def test_clamped_count_wraps_on_periodic_axes(variant):
+    maps = base_maps.build_maps(make_base("torus"), 10)
+    maps.valid[:, 0] = False                 # texel column u = 0 (and u = 1 by wrapping)
+    u = mi.Float([0.0, 1.0, -1.0, 0.02, 0.5, 0.96])
+    v = mi.Float([0.3] * 6)
+    assert maps.clamped_count(u, v) == 5     # 0.96 rounds to texel 10 = 0 as well
+    assert maps.clamped_count(u, v) == int((~maps.texel_valid(np.asarray(u), np.asarray(v))).sum())

@@ -57,6 +57,7 @@ def test_tiles_over_invalid_regions_are_pruned_or_clamped(spot):
     assert np.all(np.isfinite(_np(p))) and np.all(np.isfinite(_np(n)))
     clamped = ~m.maps.texel_valid(np.asarray(uv.x), np.asarray(uv.y))
     assert clamped.any()                    # tiles straddling the layout's border
+    assert m.maps.clamped_count(uv.x, uv.y) == int(clamped.sum())   # Dr.Jit == NumPy
     exact = DDMModel(DDMConfig(**{**cfg.__dict__, "mode": "exact"}), base=spot)
     assert exact.layout.count == m.layout.count   # both modes prune the same tiles
     pe, _, _ = exact.map()
