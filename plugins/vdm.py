@@ -297,6 +297,21 @@ class VDM(MesostructureBSDF):
                           curvature_clamped_vertices=clamped,
                           table_bytes=self.data.table_bytes(), compressed_bytes=lookup.nbytes)
 
+    def rebuild(self, res=None, theta=None, phi=None, curvatures=None, svd_terms=None,
+                mvm_terms=None, use_cache=None) -> None:
+        """Rebuild the table with other sizes / term counts (trade-off sweeps); the tile size
+        and curvatures of the attached meshes are kept."""
+        s = self.spec
+        self.spec = build.check_spec(build.VDMSpec(
+            res=res or s.res, n_theta=theta or s.n_theta, n_phi=phi or s.n_phi,
+            n_curv=curvatures or s.n_curv, theta_oversample=s.theta_oversample))
+        self.svd_terms = svd_terms or self.svd_terms
+        self.mvm_terms = mvm_terms or self.mvm_terms
+        if use_cache is not None:
+            self.use_cache = bool(use_cache)
+        self._require(self.stats.get("tile_size") is not None)
+        self._setup(self.stats["tile_size"], self._meshes)
+
     def _prepare(self, si, active):
         self._require(self.steps is not None)
         fp = self.steps.footprint(si, active)
