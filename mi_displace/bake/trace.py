@@ -215,5 +215,7 @@ def trace(high: HighPoly, low: LowPolyDevice, prim, b1, b2, max_distance: float,
         start = p + direction * d
         pd = _hit(high.scene, start - direction * delta, -direction, d + max_distance)
         back = dr.select(found & pd.is_valid(), d - delta - pd.t, -max_distance)
-    return TraceResult(status, d, n_high, _tangent_space(t, b, n_raw, n_high),
-                       _tangent_space(t, b, n_raw, direction), back)
+    # along the normal the direction is the tangent frame's z axis by construction
+    dir_ts = (_tangent_space(t, b, n_raw, direction) if q is not None
+              else mi.Vector3f(dr.zeros(mi.Float, dr.width(d)), 0.0, 1.0))
+    return TraceResult(status, d, n_high, _tangent_space(t, b, n_raw, n_high), dir_ts, back)
