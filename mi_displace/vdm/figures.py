@@ -41,7 +41,7 @@ def methods_figure(name: str, out: Path, res: int) -> dict:
     from mi_displace.core.io import to_srgb
     from mi_displace.vdm import methods
 
-    result = methods.methods_table(SCENES[name], {"res": str(res)}, repeats=1)
+    result = methods.methods_table(SCENES[name], {"res": str(res)}, repeats=3)
     rows = {r["method"]: r for r in result["rows"]}
     order = ["reference", "bump", "horizon", "relief", "approximation"]
     fig = Figure(figsize=(3 * len(order), 3.4))
@@ -155,14 +155,17 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default=str(ROOT / "docs" / "figures"))
     parser.add_argument("--res", type=int, default=256)
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--only", choices=("methods", "sweeps"), default=None)
     args = parser.parse_args(argv)
     mi_displace.init()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    for name in SCENES:
-        methods_figure(name, out, args.res)
-        gc.collect()
-    sweeps(out, args.res, args.quick)
+    if args.only in (None, "methods"):
+        for name in SCENES:
+            methods_figure(name, out, args.res)
+            gc.collect()
+    if args.only in (None, "sweeps"):
+        sweeps(out, args.res, args.quick)
     return 0
 
 
