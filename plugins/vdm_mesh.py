@@ -47,7 +47,7 @@ def base_geometry(props: mi.Properties):
     """(positions, normals, uvs, faces) NumPy arrays of the undisplaced base (object space)."""
     if "filename" in props:
         # relative to the scene's folder (Mitsuba's file resolver), else to the cwd
-        name = str(mi.Thread.thread().file_resolver().resolve(props.get("filename")))
+        name = str(mi.file_resolver().resolve(props.get("filename")))
         return _load_base_mesh(name)
     name = props.get("base", "sphere")
     base = surfaces.make_base(name, **{k: float(props.get(k)) for k in BASE_PARAMS.get(name, ())

@@ -200,3 +200,16 @@ def test_nan_heights_are_refused(variant):
         mi.load_dict(_vdm_sphere(height=_bitmap(bad)))
     with pytest.raises(Exception, match="height"):
         mi.load_dict({"type": "vdm", "depth": 0.1, "tile_size": 1.0})
+
+
+def test_rebuild_with_other_sizes(variant):
+    scene = _scene(_vdm_sphere())
+    bsdf = scene.shapes()[0].bsdf()
+    first = _render(scene)
+    bsdf.rebuild(res=16, phi=8, svd_terms=4, mvm_terms=2)
+    assert bsdf.data.spec.res == 16 and bsdf.data.spec.n_phi == 8
+    assert bsdf.stats["compressed_bytes"] == bsdf.data.compressed.nbytes(4, 2)
+    second = _render(scene)
+    assert np.abs(second - first).max() > 0          # a coarser table, another image
+    with pytest.raises(ValueError, match="res"):
+        bsdf.rebuild(res=5000)
