@@ -106,5 +106,8 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8)
     L = shade(scene, ray, max_layers) * weight
     n = aa * aa
     if n > 1:
+        # evaluate the shading once: each channel's block_reduce would otherwise launch
+        # its own copy of the whole shading kernel (3x the work for costly BSDFs)
+        dr.eval(L)
         L = mi.Color3f([dr.block_reduce(dr.ReduceOp.Add, c, n) / n for c in L])
     return mi.TensorXf(dr.ravel(L), (h, w, 3))
