@@ -20,7 +20,6 @@ first; the baker issue brings xatlas).  ``scale`` and ``midlevel`` are editable 
 from __future__ import annotations
 
 import math
-import os
 import time
 
 import drjit as dr
@@ -28,6 +27,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.core import surfaces, tessellate
+from mi_displace.core.mesh_io import load_uv_mesh
 from mi_displace.core.texture_height import check_texture_finite, height_function
 
 BASE_PARAMS = {
@@ -36,31 +36,6 @@ BASE_PARAMS = {
     "cylinder": ("radius", "length"),
     "torus": ("major_radius", "minor_radius"),
 }
-
-
-def _load_base_mesh(filename: str):
-    """Positions (V,3), normals (V,3), uvs (V,2), faces (F,3) of a PLY/OBJ file with UVs."""
-    if not os.path.isfile(filename):
-        raise FileNotFoundError(f"displaced: base mesh 'filename' not found: {filename}")
-    ext = os.path.splitext(filename)[1].lower()
-    if ext not in (".ply", ".obj"):
-        raise ValueError(f"displaced: base mesh {filename!r} must be .ply or .obj")
-    mesh = mi.load_dict({"type": ext[1:], "filename": filename, "face_normals": False})
-    if not mesh.has_vertex_texcoords():
-        raise ValueError(
-            f"displaced: base mesh {filename!r} has no UVs (vertex texture coordinates); "
-            "unwrap it first (e.g. xatlas or Blender's Smart UV Project)"
-        )
-    params = mi.traverse(mesh)
-    pos = np.asarray(params["vertex_positions"], np.float32).reshape(-1, 3)
-    if mesh.has_vertex_normals():
-        nrm = np.asarray(params["vertex_normals"], np.float32).reshape(-1, 3)
-    else:
-        mesh.recompute_vertex_normals()
-        nrm = np.asarray(mi.traverse(mesh)["vertex_normals"], np.float32).reshape(-1, 3)
-    uvs = np.asarray(params["vertex_texcoords"], np.float32).reshape(-1, 2)
-    faces = np.asarray(params["faces"], np.int64).reshape(-1, 3)
-    return pos, nrm, uvs, faces
 
 
 def _mesh_level(mesh_data, props, edge_length) -> int:
@@ -118,7 +93,7 @@ class Displaced(mi.Mesh):
         if base_name == "mesh":
             if "filename" not in props:
                 raise ValueError("displaced: base 'mesh' needs a 'filename' (PLY/OBJ with UVs)")
-            mesh_data = _load_base_mesh(props.get("filename"))
+            mesh_data = load_uv_mesh(props.get("filename"))
             base, grid = None, _mesh_level(mesh_data, props, edge_length)
         else:
             base = surfaces.make_base(

@@ -24,7 +24,6 @@ cannot see its shape; a shape that owns the estimate and calls ``bsdf.attach`` s
 """
 from __future__ import annotations
 
-import math
 import time
 
 import drjit as dr
@@ -32,7 +31,8 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.core import surfaces, tessellate
-from mi_displace.plugins.displaced import BASE_PARAMS, _load_base_mesh
+from mi_displace.core.mesh_io import load_uv_mesh
+from mi_displace.plugins.displaced import BASE_PARAMS
 from mi_displace.vdm import mesh_curvature
 from mi_displace.vdm.steps import KDIAG, KOFF
 
@@ -46,9 +46,7 @@ def _columns(v) -> np.ndarray:
 def base_geometry(props: mi.Properties):
     """(positions, normals, uvs, faces) NumPy arrays of the undisplaced base (object space)."""
     if "filename" in props:
-        # relative to the scene's folder (Mitsuba's file resolver), else to the cwd
-        name = str(mi.file_resolver().resolve(props.get("filename")))
-        return _load_base_mesh(name)
+        return load_uv_mesh(props.get("filename"), "vdm_mesh")
     name = props.get("base", "sphere")
     base = surfaces.make_base(name, **{k: float(props.get(k)) for k in BASE_PARAMS.get(name, ())
                                        if k in props})

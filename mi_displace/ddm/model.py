@@ -9,16 +9,15 @@ w scale.
 from __future__ import annotations
 
 import math
-import os
 import time
 import warnings
 from dataclasses import dataclass, field
 
 import drjit as dr
-import mitsuba as mi
 import numpy as np
 
 from mi_displace.core import surfaces
+from mi_displace.core.mesh_io import load_uv_mesh, resolve_path
 from mi_displace.ddm import animation as anim
 from mi_displace.ddm import base_maps, mapping
 from mi_displace.ddm.layout import make_layout
@@ -32,28 +31,19 @@ class FoldingWarning(UserWarning):
     """w exceeds the base's radius of curvature: the mapped volume folds over itself."""
 
 
-def resolve_path(name: str) -> str:
-    """A file name resolved like Mitsuba's own plugins do (relative to the scene file)."""
-    return str(mi.file_resolver().resolve(str(name)))
-
-
 def make_base(name: str, filename: str | None = None, clamp_resolution: int = 512, **params):
     """A DDM base: ``plane``/``sphere``/``cylinder``/``torus`` (analytic), ``teapot`` (the
     Utah teapot body, Bezier patches) or ``mesh`` (``filename``: OBJ/PLY with UVs)."""
     if name == "teapot":
         from mi_displace.core.bezier import teapot_body
 
-        return teapot_body(filename)
+        return teapot_body(resolve_path(filename) if filename else None)
     if name == "mesh":
         from mi_displace.ddm.mesh_base import MeshBase
-        from mi_displace.plugins.displaced import _load_base_mesh
 
         if not filename:
             raise ValueError("ddm: base 'mesh' needs a 'filename' (PLY/OBJ with UVs)")
-        filename = resolve_path(filename)
-        if not os.path.isfile(filename):
-            raise FileNotFoundError(f"ddm: base mesh 'filename' not found: {filename}")
-        pos, nrm, uvs, faces = _load_base_mesh(filename)
+        pos, nrm, uvs, faces = load_uv_mesh(filename, "ddm")
         return MeshBase(pos, nrm, uvs, faces, base_maps.check_resolution(
             clamp_resolution, "clamp_resolution"))
     return surfaces.make_base(name, **params)

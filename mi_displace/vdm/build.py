@@ -12,7 +12,6 @@ import math
 import time
 from dataclasses import dataclass, field
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 

@@ -22,7 +22,6 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENES = {"torus": ROOT / "scenes" / "vdm_torus.xml", "spot": ROOT / "scenes" / "vdm_spot.xml"}

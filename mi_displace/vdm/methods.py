@@ -16,7 +16,6 @@ import gc
 import statistics
 from pathlib import Path
 
-import numpy as np
 
 from mi_displace.evaluate import metrics
 from mi_displace.render import scene as scenes

@@ -1,7 +1,6 @@
 """Curvature resampling (appendix) and the MVM (§3.3) against analytic bent geometry."""
 import math
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 

@@ -1,12 +1,9 @@
 """The vdm BSDF under raster and path: extremes and bad input (issue list)."""
-import math
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
 
-from mi_displace.render import raster
 
 SMALL = {"res": 32, "theta": 8, "phi": 16, "curvatures": 4}
 MAT = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.5, 0.4]}}
