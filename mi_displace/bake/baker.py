@@ -173,7 +173,9 @@ class Baker:
         """
         H, W = height, width
         C = 12 if dual_depth else 11
-        out = np.empty((H, W, C), np.float32)
+        # one device buffer for the whole map, viewed by NumPy without a copy at the end
+        # (Dr.Jit's allocation cache reuses its pages on the next bake of the same size)
+        flat = dr.empty(mi.Float, H * W * C)
         conservative_samples = 0
         tri_hit = dr.zeros(mi.UInt32, self.layout.face_count)
         rows = max(1, CHUNK_SAMPLES // (W * aa * aa))
@@ -184,18 +186,21 @@ class Baker:
             dr.scatter(tri_hit, 1, s.prim)
             r = trace(self.high_dev, self.low_dev, s.prim, s.b1, s.b2, max_distance, delta,
                       dual_depth, continuation)
-            block = _texel_average(r, s.texel, n_rows * W, aa, max_distance, C)
-            out[row0:row0 + n_rows] = block.reshape(n_rows, W, C)
+            _texel_average(r, s.texel, n_rows * W, aa, max_distance, flat, row0 * W)
         ores = min(max(width, height), OVERLAP_RESOLUTION)
         extra = {"uv_overlap_texels": overlap_texels(self.layout, ores),
                  "uv_overlap_resolution": ores, "conservative_samples": conservative_samples,
                  "triangles_without_texels": int(self.layout.face_count
                                                  - np.count_nonzero(np.asarray(tri_hit)))}
-        return out, extra
+        return np.asarray(flat).reshape(H, W, C), extra
 
 
-def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, C: int):
-    """Per-texel mean of the samples that hit (Dr.Jit), interleaved into one (n_tex * C) buffer.
+def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.Float,
+                   first: int) -> None:
+    """Per-texel mean of the samples that hit (Dr.Jit), interleaved into ``flat``.
+
+    ``flat`` holds C channels per texel; this block's ``n_tex`` texels start at texel
+    ``first``.
 
     Only ``ok`` and ``ambiguous`` samples carry values (a back-facing hit is never measured).
     Texels without one keep displacement 0, the low-poly normal and the tangent-space z axis
@@ -234,12 +239,11 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, C: int):
     channels = [sums[0] * inv, *nt, *no, *dirn, mi.Float(st)]
     if r.back_depth is not None:
         channels.append(dr.select(has, sums[10] * inv, -max_distance))
-    flat = dr.empty(mi.Float, n_tex * C)
-    base = dr.arange(mi.UInt32, n_tex) * C
+    C = len(channels)
+    base = (dr.arange(mi.UInt32, n_tex) + first) * C
     for c, v in enumerate(channels):
         dr.scatter(flat, v, base + c)
     dr.eval(flat)
-    return np.asarray(flat)
 
 
 def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: float | None = None,
