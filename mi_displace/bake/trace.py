@@ -144,7 +144,7 @@ def _tangent_space(t, b, n, v):
 def _hit(scene, o, d, maxt):
     """Preliminary intersections, evaluated at once (else every field re-traces the rays)."""
     pi = scene.ray_intersect_preliminary(mi.Ray3f(o, d, maxt, 0.0, []), coherent=False)
-    dr.eval(pi.t, pi.prim_index, pi.prim_uv)
+    dr.eval(pi.t, pi.prim_index, pi.prim_uv, pi.valid)
     return pi
 
 

@@ -77,7 +77,7 @@ def _cast(layout: UVLayout, u: mi.Float, v: mi.Float, up: bool = False):
     ray = mi.Ray3f(o, mi.Vector3f(0.0, 0.0, 1.0 if up else -1.0), 4.0, 0.0, [])
     pi = layout.scene.ray_intersect_preliminary(ray, coherent=True)
     # one kernel for every field: evaluated separately, each would trace the rays again
-    dr.eval(pi.t, pi.prim_index, pi.prim_uv)
+    dr.eval(pi.t, pi.prim_index, pi.prim_uv, pi.valid)
     return pi
 
 

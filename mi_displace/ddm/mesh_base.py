@@ -89,6 +89,8 @@ class MeshBase(BaseSurface):
         n = dr.width(u)
         ray = mi.Ray3f(mi.Point3f(u, v, 1.0), dr.zeros(mi.Vector3f, n) + mi.Vector3f(0, 0, -1))
         pi = self._scene.ray_intersect_preliminary(ray, coherent=False)
+        # every field in one kernel: evaluated one by one, each would trace the rays again
+        dr.eval(pi.valid, pi.prim_index, pi.prim_uv)
         valid = pi.is_valid()
         prim = dr.select(valid, pi.prim_index, 0)
         return valid, prim, pi.prim_uv.x, pi.prim_uv.y
