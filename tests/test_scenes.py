@@ -20,8 +20,25 @@ def render(path, spp, seed=0, **params):
     return img
 
 
+@pytest.fixture
+def elsewhere(tmp_path, monkeypatch):
+    """Run from an empty folder with a fresh file resolver (Mitsuba's holds the cwd of its
+    start-up): a scene that names files relative to the cwd, not to itself, fails."""
+    thread = mi.Thread.thread()
+    saved = thread.file_resolver()
+    fresh = mi.FileResolver()
+    fresh.clear()
+    for folder in saved:  # keep Mitsuba's own folders (plugins), drop the start-up cwd
+        if Path(str(folder)).resolve() != Path.cwd().resolve():
+            fresh.append(folder)
+    monkeypatch.chdir(tmp_path)
+    thread.set_file_resolver(fresh)
+    yield
+    thread.set_file_resolver(saved)
+
+
 @pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
-def test_scene_renders_both_sides(variant, path):
+def test_scene_renders_both_sides(variant, path, elsewhere):
     # `resolution` (tessellation) exists on the reference side only in some scenes
     images = {mode: render(path, 4, mode=mode, integrator=integ, res=48,
                            **({"resolution": 64} if mode == "reference" else {}))
