@@ -24,17 +24,16 @@ def render(path, spp, seed=0, **params):
 def elsewhere(tmp_path, monkeypatch):
     """Run from an empty folder with a fresh file resolver (Mitsuba's holds the cwd of its
     start-up): a scene that names files relative to the cwd, not to itself, fails."""
-    thread = mi.Thread.thread()
-    saved = thread.file_resolver()
+    saved = mi.file_resolver()
     fresh = mi.FileResolver()
     fresh.clear()
     for folder in saved:  # keep Mitsuba's own folders (plugins), drop the start-up cwd
         if Path(str(folder)).resolve() != Path.cwd().resolve():
             fresh.append(folder)
     monkeypatch.chdir(tmp_path)
-    thread.set_file_resolver(fresh)
+    mi.set_file_resolver(fresh)
     yield
-    thread.set_file_resolver(saved)
+    mi.set_file_resolver(saved)
 
 
 @pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
