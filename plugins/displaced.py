@@ -14,7 +14,7 @@
 
 Mesh bases: ``base="mesh"`` with ``filename`` (PLY/OBJ with UVs) and ``subdivision`` (edge
 splits per triangle) or ``edge_length``.  Meshes without UVs are refused (unwrap them
-first; the baker issue brings xatlas).  ``scale`` and ``midlevel`` are editable through
+first, e.g. with ``mi_displace.bake.unwrap.unwrap`` (xatlas)).  ``scale`` and ``midlevel`` are editable through
 ``mi.traverse`` (re-displacement keeps the topology).
 """
 from __future__ import annotations
