@@ -185,7 +185,7 @@ def trace(high: HighPoly, low: LowPolyDevice, prim, b1, b2, max_distance: float,
     else:  # cage: from q through p (Fig. 8)
         to_p = p - q
         span = dr.norm(to_p)
-        dirn = to_p / dr.maximum(span, 1e-30)
+        dirn = mi.Vector3f(to_p / dr.maximum(span, 1e-30))  # Point3f - Point3f stays a Point3f
         pc = _hit(high.scene, q, dirn, span + max_distance)
         found = pc.is_valid()
         front = high.facing(pc.prim_index, n, found)

@@ -13,6 +13,19 @@ def test_cage_offset_measures_along_the_cage(variant, tmp_path):
     assert np.allclose(r.maps["displacement"], 0.02, atol=1e-6)
 
 
+def test_cage_rays_that_miss_are_classified(variant):
+    # the high-poly covers x < 0.5 only: rays over the other half miss (status, no crash)
+    from mi_displace.bake.trace import MISS, OK
+
+    high = plane(z=0.02, n=4)
+    high = MeshData(high.positions * np.float32([0.5, 1, 1]), high.faces, None)
+    r = bake(high, plane(n=2), res=16, cage_offset=0.1, max_distance=0.05, pad=0,
+             min_hit_fraction=0.25)
+    left = np.arange(16) < 7
+    assert np.all(r.status[:, left] == OK) and np.all(r.status[:, ~left][:, 2:] == MISS)
+    assert np.allclose(r.maps["displacement"][:, left], 0.02, atol=1e-6)
+
+
 def test_tilted_cage_direction_round_trip(variant, tmp_path):
     low = plane(n=2)
     cage = MeshData(low.positions + np.float32([0.05, 0.0, 0.1]), low.faces, low.uvs)
