@@ -95,6 +95,14 @@ def parse_mesostructure(props: mi.Properties, plugin: str):
     return dict(nested=nested, height=height, depth=depth, tiling=(tu, tv), tile_size=tile_size)
 
 
+
+def _round_out(x: float, direction, digits: int = 4) -> float:
+    """``x`` rounded to ``digits`` significant digits with ``direction`` (math.floor/ceil)."""
+    if x == 0 or not math.isfinite(x):
+        return x
+    step = 10.0 ** (math.floor(math.log10(abs(x))) - digits + 1)
+    return direction(x / step) * step
+
 class MesostructureBSDF(mi.BSDF):
     """Base of the per-pixel mesostructure BSDFs: flags, nested BSDF plumbing.
 
@@ -275,7 +283,9 @@ class VDM(MesostructureBSDF):
             hi_w = float(np.percentile(c_max, 100 - q)) if q > 0 else float(c_max.max())
             if self.fixed_range is not None:
                 lo_w, hi_w = self.fixed_range
-            lo, hi = lo_w * tile_size, hi_w * tile_size
+            # widened to 4 significant digits: the mesh estimate jitters in the last bits
+            # between loads, which would change the cache key and the traced kernels
+            lo, hi = _round_out(lo_w * tile_size, math.floor), _round_out(hi_w * tile_size, math.ceil)
             clamped = int(np.count_nonzero((c_min * tile_size < lo - 1e-9)
                                            | (c_max * tile_size > hi + 1e-9)))
         elif self.fixed_range is not None:

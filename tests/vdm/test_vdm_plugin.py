@@ -210,3 +210,20 @@ def test_rebuild_with_other_sizes(variant):
     assert np.abs(second - first).max() > 0          # a coarser table, another image
     with pytest.raises(ValueError, match="res"):
         bsdf.rebuild(res=5000)
+
+
+def test_measured_curvature_range_is_widened_to_a_stable_grid():
+    # the mesh estimate jitters in its last bits between loads; the table's range (and so
+    # its cache key and kernels) must not
+    import math
+
+    from mi_displace.plugins.vdm import _round_out
+
+    rng = np.random.default_rng(3)
+    for x in rng.uniform(-30, 30, 200):
+        lo, hi = _round_out(x, math.floor), _round_out(x, math.ceil)
+        assert lo <= x <= hi and (hi - lo) <= 1e-3 * abs(x) + 1e-12
+        for jitter in (1 + 1e-8, 1 - 1e-8):
+            if abs(x * jitter - lo) > 1e-6 * abs(x) and abs(x * jitter - hi) > 1e-6 * abs(x):
+                assert _round_out(x * jitter, math.floor) == lo
+    assert _round_out(0.0, math.floor) == 0.0
