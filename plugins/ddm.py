@@ -23,6 +23,8 @@ keeping faces, geometry images and tiles.
 """
 from __future__ import annotations
 
+import math
+
 import time
 
 import drjit as dr
@@ -39,11 +41,16 @@ ANIMATION_KEYS = ("velocity_u", "velocity_v", "rotation_rate", "w_amplitude", "w
                   "alpha0", "alpha_rate")
 
 
-def _int(value, name: str) -> int:
+def _int(value, name: str, low: int = 0) -> int:
+    """A whole number >= ``low`` (2.5 is refused, not truncated)."""
     try:
-        return int(value)
+        number = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"ddm: '{name}' must be an integer or 'auto', got {value!r}") from None
+        number = math.nan
+    if not (math.isfinite(number) and number == int(number) and number >= low):
+        what = "an integer or 'auto'" if name == "map_resolution" else f"an integer >= {low}"
+        raise ValueError(f"ddm: '{name}' must be {what}, got {value!r}")
+    return int(number)
 
 
 def config_from_props(props: mi.Properties) -> DDMConfig:
@@ -57,7 +64,7 @@ def config_from_props(props: mi.Properties) -> DDMConfig:
             setattr(cfg, key, float(props.get(key)))
     for key in INT_KEYS:
         if key in props:
-            setattr(cfg, key, int(props.get(key)))
+            setattr(cfg, key, _int(props.get(key), key, 0 if key == "seed" else 1))
     if "map_resolution" in props:   # an integer, or the string "auto"
         value = props.get("map_resolution")
         cfg.map_resolution = "auto" if str(value).strip() == "auto" else _int(value, "map_resolution")
@@ -77,9 +84,7 @@ class DDM(mi.Mesh):
             props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float32)))
         self.time = mi.Float(m.cfg.time)
         self.height = mi.Float(m.cfg.height)
-        params = mi.traverse(self)
-        params["faces"] = dr.ravel(m.faces)
-        params.update()
+        self._faces_version = None
         self._remap()
         stats = m.stats()
         mi.Log(mi.LogLevel.Info,
@@ -94,6 +99,9 @@ class DDM(mi.Mesh):
         positions, normals, uv = self.model.map(self.time[0], self.height[0])
         to_world = mi.Transform4f(self.to_world)
         params = mi.traverse(self)
+        if self._faces_version != self.model.faces_version:  # the w scale changed sign
+            params["faces"] = dr.ravel(self.model.faces)
+            self._faces_version = self.model.faces_version
         params["vertex_positions"] = dr.ravel(to_world @ positions)
         params["vertex_normals"] = dr.ravel(dr.normalize(to_world @ mi.Normal3f(normals)))
         params["vertex_texcoords"] = dr.ravel(uv)

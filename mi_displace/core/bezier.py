@@ -60,7 +60,6 @@ def _bernstein(t):
     s = 1 - t
     b = [s * s * s, 3 * t * s * s, 3 * t * t * s, t * t * t]
     db = [-3 * s * s, 3 * s * s - 6 * t * s, 6 * t * s - 3 * t * t, 3 * t * t]
-    ddb = [6 * s, 6 * t - 12 * s + 6 * t * 0 + 6 * s * 0 - 0 * t + 0 * s + (-6 * s + 6 * s), 0, 0]
     ddb = [6 * s, -12 * s + 6 * t, 6 * s - 12 * t, 6 * t]
     return b, db, ddb
 

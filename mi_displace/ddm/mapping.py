@@ -110,12 +110,20 @@ class Placement:
         return sum(c * buffers.vertex_count[k] for _, c, k in self.groups)
 
 
-def orientation(base, height: float) -> float:
-    """+1 if T(u, v, w) keeps the tile's orientation, -1 if it mirrors it: the sign of
-    (S_u x S_v) . n at a sample of the base times the sign of ``height``."""
-    s = base.sample(mi.Float(0.3), mi.Float(0.4))
-    det = dr.dot(dr.cross(s.dp_du, s.dp_dv), s.n)[0]
-    return (1.0 if det >= 0 else -1.0) * (-1.0 if height < 0 else 1.0)
+def orientation(base, placement: "Placement") -> mi.Float:
+    """Per placed tile: +1 where the base's parametrisation keeps the tile's orientation, -1
+    where it mirrors it — the sign of (S_u x S_v) . n at the tile's centre.  Analytic bases
+    give one sign; a mesh base's UV charts may be mirrored one by one.
+
+    Returns:
+        mi.Float (I,), one sign per instance (placement order).
+    """
+    su, sv = placement.size
+    s = base.sample(placement.offsets.x + 0.5 * su, placement.offsets.y + 0.5 * sv)
+    det = dr.dot(dr.cross(s.dp_du, s.dp_dv), s.n)
+    sign = dr.select(det >= 0, 1.0, -1.0)
+    dr.eval(sign)
+    return sign
 
 
 def check_size(vertices: int, faces: int, what: str = "tiles_u x tiles_v") -> int:
@@ -138,21 +146,24 @@ def check_size(vertices: int, faces: int, what: str = "tiles_u x tiles_v") -> in
 
 
 def instance_faces(placement: Placement, buffers: TileBuffers, tile_faces: list,
-                   flip: bool = False) -> mi.Vector3u:
+                   flip: mi.Bool | None = None) -> mi.Vector3u:
     """Triangles of all placed tiles: tile faces offset by each instance's first vertex
-    (winding reversed with ``flip``, for orientation-reversing mappings)."""
+    (winding reversed where ``flip``, mi.Bool (I,) per instance: orientation-reversing
+    mappings)."""
     vbase = 0
     face_sets = [mi.Vector3u(*(mi.UInt32(np.ascontiguousarray(f[:, k])) for k in range(3)))
                  for f in tile_faces]
     out = []
-    for _, count, k in placement.groups:
+    for first, count, k in placement.groups:
         nf, nv = len(tile_faces[k]), buffers.vertex_count[k]
         j = dr.arange(mi.UInt32, count * nf)
         inst, local = j // nf, j % nf
         shift = vbase + inst * nv
-        corners = [dr.gather(mi.UInt32, face_sets[k][c], local) + shift for c in range(3)]
-        out.append(mi.Vector3u(corners[0], corners[2], corners[1]) if flip
-                   else mi.Vector3u(*corners))
+        c0, c1, c2 = (dr.gather(mi.UInt32, face_sets[k][c], local) + shift for c in range(3))
+        if flip is not None:
+            f = dr.gather(mi.Bool, flip, first + inst)
+            c1, c2 = dr.select(f, c2, c1), dr.select(f, c1, c2)
+        out.append(mi.Vector3u(c0, c1, c2))
         vbase += count * nv
     if len(out) == 1:
         return out[0]
@@ -182,7 +193,7 @@ def _instance_vertex(placement: Placement, buffers: TileBuffers):
 
 def map_tiles(evaluator, placement: Placement, buffers: TileBuffers, affine, height: float,
               w_offset: float, method: str = "tangent", eps: float = 1e-3,
-              tile_override=None, orientation: float = 1.0):
+              tile_override=None, orientation: mi.Float | None = None):
     """Map every placed tile vertex and its normal.
 
     Args:
@@ -194,9 +205,10 @@ def map_tiles(evaluator, placement: Placement, buffers: TileBuffers, affine, hei
         eps: offset ε of the tangent / naive points [tile units].
         tile_override: optional (positions, normals, t1, t2) replacing the buffers' arrays
             (a metamorphosed tile, eq. 3).
-        orientation: -1 where T reverses orientation (a base with S_u x S_v against n, or a
-            negative height): mapped faces are then wound the other way
-            (:func:`instance_faces` with ``flip``) and the cofactor / tangent normals negated.
+        orientation: mi.Float (I,), per instance -1 where T reverses orientation (a base
+            chart with S_u x S_v against n, times the sign of the w scale): mapped faces are
+            then wound the other way (:func:`instance_faces` with ``flip``) and the cofactor
+            / tangent normals negated.  None: +1 everywhere.
 
     Returns:
         ``(positions, normals, uv)``: mi.Point3f, unit mi.Vector3f, mi.Point2f per vertex.
@@ -208,6 +220,7 @@ def map_tiles(evaluator, placement: Placement, buffers: TileBuffers, affine, hei
     vp = gather(mi.Vector3f, tp, k)
     vn = gather(mi.Vector3f, tn, k)
     offset = gather(mi.Point2f, placement.offsets, inst)
+    sign = 1.0 if orientation is None else dr.gather(mi.Float, orientation, inst)
     # per-frame scalars as opaque variables: one compiled kernel serves every frame
     (a00, a01), (a10, a11) = (tuple(dr.opaque(mi.Float, x) for x in row) for row in affine[0])
     b0, b1 = (dr.opaque(mi.Float, x) for x in affine[1])
@@ -232,13 +245,13 @@ def map_tiles(evaluator, placement: Placement, buffers: TileBuffers, affine, hei
         t_u, t_v = s_u + n_u * w, s_v + n_v * w       # dT/du, dT/dv; dT/dw = n
         a_x = (su * a00) * t_u + (sv * a10) * t_v
         a_y = (su * a01) * t_u + (sv * a11) * t_v
-        normal = orientation * nrm.cofactor_normal(a_x, a_y, height * n, vn)
+        normal = sign * nrm.cofactor_normal(a_x, a_y, height * n, vn)
     else:
         s, n = evaluator(u, v, False)
         pos = s + n * w
         if method == "tangent":   # §3.2: map the two precomputed tangent points
-            normal = orientation * dr.cross(T(vp + eps * gather(mi.Vector3f, t1, k)) - pos,
-                                            T(vp + eps * gather(mi.Vector3f, t2, k)) - pos)
+            normal = sign * dr.cross(T(vp + eps * gather(mi.Vector3f, t1, k)) - pos,
+                                     T(vp + eps * gather(mi.Vector3f, t2, k)) - pos)
         else:
             normal = T(vp + eps * vn) - pos
     return mi.Point3f(pos), nrm.finish(normal, dr.normalize(n)), mi.Point2f(u, v)

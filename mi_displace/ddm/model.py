@@ -27,6 +27,10 @@ BASE_PARAMS = {"plane": (), "sphere": ("radius",), "cylinder": ("radius", "lengt
                "torus": ("major_radius", "minor_radius"), "teapot": ()}
 
 
+def _sign(x: float) -> float:
+    return -1.0 if x < 0 else 1.0
+
+
 class FoldingWarning(UserWarning):
     """w exceeds the base's radius of curvature: the mapped volume folds over itself."""
 
@@ -156,9 +160,10 @@ class DDMModel:
         self.layout = layout
         self.placement = mapping.Placement.from_layout(layout, len(self.tiles))
         self.buffers = mapping.TileBuffers.from_tiles(self.tiles)
-        self.orientation = mapping.orientation(self.base, cfg.height)
-        self.faces = mapping.instance_faces(self.placement, self.buffers,
-                                            [t.faces for t in self.tiles], self.orientation < 0)
+        self.chart_orientation = mapping.orientation(self.base, self.placement)
+        self.faces_sign = 0.0          # sign of the w scale the faces are wound for
+        self.faces_version = 0         # bumped whenever the faces are rebuilt
+        self._wind_faces(_sign(cfg.height * cfg.animation.w_factor(cfg.time)))
         if self.target is not None:
             self._target = mapping.TileBuffers.from_tiles([self.target])
         self.evaluator = (mapping.MapsEvaluator(self.maps) if cfg.mode == "maps"
@@ -166,6 +171,17 @@ class DDMModel:
         self.vertex_count = self.placement.vertex_total(self.buffers)
         self.face_count = dr.width(self.faces)
         self.build_s = time.perf_counter() - start
+
+    def _wind_faces(self, sign: float) -> None:
+        """(Re)build the faces for a w scale of this sign: a negative scale mirrors every
+        tile, so its faces turn round with it (cheap: one kernel over the face indices)."""
+        if sign == self.faces_sign:
+            return
+        self.faces = mapping.instance_faces(self.placement, self.buffers,
+                                            [t.faces for t in self.tiles],
+                                            self.chart_orientation * sign < 0)
+        self.faces_sign = sign
+        self.faces_version += 1
 
     def _all_valid_base(self) -> bool:
         from mi_displace.ddm.mesh_base import MeshBase
@@ -212,11 +228,26 @@ class DDMModel:
         cfg = self.cfg
         t = cfg.time if t is None else float(t)
         height = cfg.height if height is None else float(height)
+        for name, value in (("time", t), ("height", height)):
+            if not math.isfinite(value):
+                raise ValueError(f"ddm: '{name}' must be finite, got {value}")
         a = cfg.animation
+        scale = height * a.w_factor(t)
+        self._wind_faces(_sign(scale))
         return mapping.map_tiles(evaluator or self.evaluator, self.placement, self.buffers,
-                                 a.affine(t), height * a.w_factor(t), cfg.w_offset,
+                                 self._periodic_affine(a.affine(t)), scale, cfg.w_offset,
                                  method or cfg.normals, cfg.epsilon, self.tile_buffers_at(t),
-                                 self.orientation)
+                                 self.chart_orientation * self.faces_sign)
+
+    def _periodic_affine(self, affine):
+        """The translation reduced by whole periods of a periodic base (in double precision,
+        before it reaches float32 texture coordinates: long animations stay exact)."""
+        (a, (b0, b1)), (su, sv) = affine, self.placement.size
+        if getattr(self.base, "periodic_u", False):
+            b0 = math.fmod(b0 * su, 1.0) / su
+        if getattr(self.base, "periodic_v", False):
+            b1 = math.fmod(b1 * sv, 1.0) / sv
+        return a, (b0, b1)
 
     def memory_report(self) -> dict:
         """Bytes HDDM stores (tile(s) + offsets + maps) against the explicit mapped mesh."""
