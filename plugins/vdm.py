@@ -295,6 +295,14 @@ class VDM(MesostructureBSDF):
         spec = build.VDMSpec(res=self.spec.res, n_theta=self.spec.n_theta, n_phi=self.spec.n_phi,
                              n_curv=self.spec.n_curv, depth=self.depth / tile_size,
                              c_range=(lo, hi), theta_oversample=self.spec.theta_oversample)
+        # the SVD keeps at most one eigen-function per table column: check before building
+        stored = min(build.K_STORED, len(spec.curvatures()) * (spec.n_theta + 1))
+        for name, k in (("svd_terms", self.svd_terms), ("mvm_terms", self.mvm_terms)):
+            if k > stored:
+                raise ValueError(
+                    f"vdm: '{name}' = {k} exceeds the {stored} eigen-functions this table keeps "
+                    f"({len(spec.curvatures())} curvature(s) x ({spec.n_theta} theta + 1) "
+                    f"columns, at most {build.K_STORED}); lower it or raise 'theta'")
         heights = table.sample_heights(self.height, spec.res, self.tiling)
         self.data = build.build(heights, spec, use_cache=self.use_cache)
         lookup = cached_lookup(self.data, self.svd_terms, self.mvm_terms)

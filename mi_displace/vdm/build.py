@@ -47,6 +47,9 @@ class VDMSpec:
         return curvature.curvature_grid(lo, hi, n)
 
 
+MAX_THETA_PAIRS = 1024   # theta^2 * theta_oversample (paper: 8 * 8 * 1 = 64)
+
+
 def _positive_int(name: str, value, low: int = 1, high: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer, float)) or \
             int(value) != value or value < low or (high is not None and value > high):
@@ -62,6 +65,12 @@ def check_spec(spec: VDMSpec) -> VDMSpec:
     spec.n_phi = _positive_int("phi", spec.n_phi, 4, 256)
     spec.n_curv = _positive_int("curvatures", spec.n_curv, 1, 64)
     spec.theta_oversample = _positive_int("theta_oversample", spec.theta_oversample, 1, 8)
+    pairs = spec.n_theta * spec.n_theta * spec.theta_oversample
+    if pairs > MAX_THETA_PAIRS:
+        # the appendix's re-sampling is unrolled over (source, target) angle pairs: the
+        # kernel grows with their product and compiles for minutes beyond this
+        raise ValueError(f"vdm: 'theta'^2 x 'theta_oversample' = {pairs} exceeds "
+                         f"{MAX_THETA_PAIRS}; lower 'theta' or 'theta_oversample'")
     if not math.isfinite(spec.depth) or spec.depth < 0:
         raise ValueError(f"vdm: 'depth' must be finite and >= 0, got {spec.depth!r}")
     lo, hi = spec.c_range

@@ -43,8 +43,12 @@ def phi_grid(n_phi: int) -> np.ndarray:
     return np.arange(n_phi) * (2 * math.pi / n_phi)
 
 
+HEIGHT_TOLERANCE = 1e-3   # filtering may overshoot [0, 1] by this much (then clipped)
+
+
 def check_heights(heights: np.ndarray, name: str = "height") -> np.ndarray:
-    """A finite float32 (res_y, res_x) height grid in [0, 1] (values clipped), else ValueError."""
+    """A finite float32 (res_y, res_x) height grid in [0, 1], else ValueError (values within
+    :data:`HEIGHT_TOLERANCE` outside are clipped: filtering overshoot)."""
     heights = np.asarray(heights, dtype=np.float32)
     if heights.ndim != 2 or min(heights.shape) < 1:
         raise ValueError(f"vdm: '{name}' grid must be a non-empty 2-D array, got shape {heights.shape}")
@@ -52,6 +56,10 @@ def check_heights(heights: np.ndarray, name: str = "height") -> np.ndarray:
     if bad.any():
         raise ValueError(f"vdm: '{name}' holds {int(bad.sum())} NaN/Inf height value(s); "
                          "clean the height map first")
+    lo, hi = float(heights.min()), float(heights.max())
+    if lo < -HEIGHT_TOLERANCE or hi > 1 + HEIGHT_TOLERANCE:
+        raise ValueError(f"vdm: '{name}' values must lie in [0, 1] (1 = the reference surface), "
+                         f"got {lo:.4g}..{hi:.4g}; rescale the height map (or use 'depth')")
     return np.clip(heights, 0.0, 1.0)
 
 

@@ -227,3 +227,23 @@ def test_measured_curvature_range_is_widened_to_a_stable_grid():
             if abs(x * jitter - lo) > 1e-6 * abs(x) and abs(x * jitter - hi) > 1e-6 * abs(x):
                 assert _round_out(x * jitter, math.floor) == lo
     assert _round_out(0.0, math.floor) == 0.0
+
+
+def test_term_counts_beyond_a_small_table_are_refused_before_building(variant):
+    # a flat table (one curvature) with 4 theta samples keeps 1 x (4 + 1) eigen-functions
+    bsdf = dict({"type": "vdm", "height": _height(), "depth": 0.05, "tile_size": 0.5,
+                 "nested": MAT}, **SMALL)
+    bsdf.update(theta=4, svd_terms=8, mvm_terms=2)
+    with pytest.raises(Exception, match="'svd_terms' = 8 exceeds the 5 eigen-functions"):
+        mi.load_dict(bsdf)
+
+
+def test_heights_outside_the_unit_range_and_huge_theta_grids_are_refused(variant):
+    from mi_displace.vdm import build, table
+
+    with pytest.raises(ValueError, match=r"must lie in \[0, 1\].*-1..3"):
+        table.check_heights(np.array([[-1.0, 3.0]], np.float32))
+    assert table.check_heights(np.array([[1.0005, -0.0005]], np.float32)).tolist() == [[1.0, 0.0]]
+    with pytest.raises(ValueError, match="theta_oversample"):
+        build.check_spec(build.VDMSpec(res=4, n_theta=32, n_phi=8, n_curv=1, theta_oversample=2))
+
