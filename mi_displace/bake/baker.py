@@ -183,6 +183,9 @@ class Baker:
             n_rows = min(rows, H - row0)
             s = rasterize_rows(self.layout, W, H, row0, n_rows, aa, conservative)
             conservative_samples += s.conservative
+            if dr.width(s.prim) == 0:  # no UV chart in these rows
+                _fill_empty(flat, row0 * W, n_rows * W, C, max_distance)
+                continue
             dr.scatter(tri_hit, 1, s.prim)
             r = trace(self.high_dev, self.low_dev, s.prim, s.b1, s.b2, max_distance, delta,
                       dual_depth, continuation)
@@ -195,6 +198,17 @@ class Baker:
         return np.asarray(flat).reshape(H, W, C), extra
 
 
+def _fill_empty(flat: mi.Float, first: int, n_tex: int, C: int, max_distance: float) -> None:
+    """What :func:`_texel_average` writes for texels without samples, for a whole block:
+    displacement 0, +z for both normals and the direction, status ``empty``, back depth
+    -max_distance."""
+    idx = dr.arange(mi.UInt32, n_tex * C)
+    c = idx % C
+    value = dr.select((c == 3) | (c == 6) | (c == 9), 1.0, 0.0)
+    value = dr.select(c == 11, -max_distance, value)
+    dr.scatter(flat, value, idx + first * C)
+
+
 def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.Float,
                    first: int) -> None:
     """Per-texel mean of the samples that hit (Dr.Jit), interleaved into ``flat``.
@@ -205,14 +219,20 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.
     Only ``ok`` and ``ambiguous`` samples carry values (a back-facing hit is never measured).
     Texels without one keep displacement 0, the low-poly normal and the tangent-space z axis
     until padding fills them from their nearest texel with a value; their status is the worst
-    of their samples.
+    of their samples.  A texel with at least one hit takes the worst status of its hits
+    (``ok`` or ``ambiguous``): with anti-aliasing, one missed sample does not discard the
+    average of the others.
     """
     hit = (r.status == OK) | (r.status == AMBIGUOUS)
     values = [r.displacement, *r.normal_tangent, *r.normal_object, *r.direction_tangent]
     if r.back_depth is not None:
         values.append(r.back_depth)
+    # status: the worst of the samples that hit, if any did (an anti-aliased texel keeps its
+    # average when one sample misses), else the worst of all (miss / beyond / backface)
     st = dr.zeros(mi.UInt32, n_tex)
     dr.scatter_reduce(dr.ReduceOp.Max, st, r.status, texel)
+    st_hit = dr.zeros(mi.UInt32, n_tex)
+    dr.scatter_reduce(dr.ReduceOp.Max, st_hit, dr.select(hit, r.status, 0), texel)
     fallback = [dr.zeros(mi.Float, n_tex) for _ in range(3)]
     for k in range(3):  # the low-poly normal (what misses carry) of any sample of the texel
         dr.scatter(fallback[k], r.normal_object[k], texel)
@@ -236,7 +256,7 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.
     no = dr.select(has, mi.Vector3f(*sums[4:7]), mi.Vector3f(*fallback))
     no = dr.normalize(dr.select(dr.squared_norm(no) > 0, no, z))  # empty texels: +z
     dirn = dr.normalize(dr.select(has, mi.Vector3f(*sums[7:10]), z))
-    channels = [sums[0] * inv, *nt, *no, *dirn, mi.Float(st)]
+    channels = [sums[0] * inv, *nt, *no, *dirn, mi.Float(dr.select(has, st_hit, st))]
     if r.back_depth is not None:
         channels.append(dr.select(has, sums[10] * inv, -max_distance))
     C = len(channels)
@@ -302,6 +322,7 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
     timings["padding_s"] = time.perf_counter() - start
     maps = split_channels(image)
     maps["valid"] = valid
+    maps["filled"] = filled     # texels holding a value (covered or padded): quantisation range
     timings["bake_s"] = timings["accel_s"] + timings["raster_trace_s"] + timings["padding_s"]
     count = diag.counts(status)
     n_cov = int(covered.sum())
@@ -355,7 +376,8 @@ def write_outputs(result: BakeResult, out_dir: Path, map_formats, diagnostics_im
     out_dir.mkdir(parents=True, exist_ok=True)
     low = result.low
     save_obj(out_dir / "low.obj", low.positions, low.faces, low.uvs, low.normals())
-    meta = {"low": "low.obj", "max_distance": result.record["settings"]["max_distance"],
+    meta = {"low": "low.obj", "low_faces": int(len(low.faces)),
+            "max_distance": result.record["settings"]["max_distance"],
             "aa": result.record["settings"]["aa"],
             "cage": result.record["settings"]["cage"] or result.record["settings"]["cage_offset"]}
     formats.write_png_raw(out_dir / "valid.png", (result.maps["valid"] > 0.5).astype(np.uint8) * 255)

@@ -93,6 +93,8 @@ def _cmd_bake(args) -> int:
 def _cmd_restore(args) -> int:
     from mi_displace.bake.restore import low_for_map, restore
 
+    if not str(args.out).lower().endswith((".ply", ".obj")):   # before any work
+        raise ValueError(f"out: restored mesh must be .ply or .obj, got {str(args.out)!r}")
     low = args.low or low_for_map(args.map)
     out = restore(low, args.map, levels=args.levels, split=args.split)
     out.save(args.out)

@@ -3,7 +3,8 @@
 Every quantised displacement channel stores ``q = round((d - offset) / scale)``; reading
 gives back ``d = offset + scale * q`` [object units] exactly as written (the sidecar holds
 ``scale`` and ``offset`` as Python floats).  Offset and scale span the baked range
-[d_min, d_max], so the full integer range is used.  Normals and directions are unit vectors
+[d_min, d_max] over the texels that hold a value (covered or padded), so the full integer
+range is used.  Normals and directions are unit vectors
 in the low-poly's tangent frame (x = tangent, y = bitangent, z = normal;
 :mod:`mi_displace.bake.meshdata`) encoded as ``(x + 1) / 2``; two-component encodings restore
 ``z = sqrt(1 - x^2 - y^2)`` (§1.2), valid because tangent-space z >= 0 on the outward side.
@@ -55,7 +56,11 @@ def check_formats(formats) -> tuple[str, ...]:
     return formats
 
 
-def _range(*arrays) -> tuple[float, float]:
+def _range(filled, *arrays) -> tuple[float, float]:
+    """(offset, span) of the values at the ``filled`` texels ((H, W) bool, or None: all):
+    empty texels beyond the padding do not widen the quantisation range."""
+    if filled is not None and np.any(filled):
+        arrays = tuple(a[filled] for a in arrays)
     lo = float(min(np.min(a) for a in arrays))
     hi = float(max(np.max(a) for a in arrays))
     return lo, (hi - lo if hi > lo else 1.0)
@@ -136,7 +141,7 @@ def write_map(out_dir: Path, fmt: str, maps: dict, meta: dict) -> Path:
             "height": int(d.shape[0]), "uv_convention": UV_CONVENTION}
     if fmt in ("d8", "d16", "dir24_d8", "dir16_d16", "d8_n24", "d16_n16"):
         bits = 16 if fmt in ("d16", "dir16_d16", "d16_n16") else 8
-        offset, span = _range(d)
+        offset, span = _range(maps.get("filled"), d)
         q, scale = _quantise(d, offset, span, bits)
         side["displacement"] = {"offset": offset, "scale": scale, "bits": bits}
         hi, lo = (q >> 8).astype(np.uint8), (q & 255).astype(np.uint8)
@@ -155,7 +160,7 @@ def write_map(out_dir: Path, fmt: str, maps: dict, meta: dict) -> Path:
         back = maps.get("back_depth")
         if back is None:
             raise ValueError("format 'dual_d8_n16' needs the back depth (bake with it requested)")
-        offset, span = _range(d, back)
+        offset, span = _range(maps.get("filled"), d, back)
         qf, scale = _quantise(d, offset, span, 8)
         qb, _ = _quantise(back, offset, span, 8)
         side["displacement"] = {"offset": offset, "scale": scale, "bits": 8}

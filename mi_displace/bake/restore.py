@@ -99,6 +99,20 @@ def restore(low, displacement_map, levels: int | None = 2, split: int | None = N
     disp = decoded.get("displacement")
     if disp is None:
         raise ValueError("map: holds no displacement (a pure normal map cannot restore geometry)")
+    meta, dirs = decoded.get("meta"), decoded.get("direction_tangent")
+    if meta is not None:  # a map file: its sidecar says how the bake measured
+        if meta.get("low_faces") not in (None, len(low.faces)):
+            raise ValueError(f"low: the map was baked over a low-poly with {meta['low_faces']:,} "
+                             f"faces, this one has {len(low.faces):,}; pass the low.obj the "
+                             "baker wrote beside the map")
+        if meta.get("cage") and dirs is None:
+            raise ValueError(f"map: baked along a cage ({meta['cage']}) but format "
+                             f"{meta['format']!r} stores no direction; restore from dir24_d8, "
+                             "dir16_d16 or float")
+        if not meta.get("cage"):
+            dirs = None   # measured along the normal: the stored direction is z, up to quantisation
+    elif dirs is not None and np.allclose(dirs[..., 2], 1.0):
+        dirs = None
     if not np.all(np.isfinite(disp)):
         raise ValueError("map: displacement has NaN/Inf texels")
     faces_out = len(low.faces) * L * L
@@ -122,8 +136,7 @@ def restore(low, displacement_map, levels: int | None = 2, split: int | None = N
     lookup = mi.Point2f(uv.x, 1.0 - uv.y)          # image row 0 holds v = 1
     d = _texture(disp).eval(lookup)[0]
     direction = n
-    dirs = decoded.get("direction_tangent")
-    if dirs is not None and not np.allclose(dirs[..., 2], 1.0):
+    if dirs is not None:
         t_v, s_v = tangent_frame(low.positions, low.faces, low.uvs, normals)
         t = interp(mi.Vector3f, t_v)
         b = dr.sign(interp(mi.Vector2f, np.stack([s_v, s_v], 1)).x) * dr.cross(n_raw, t)

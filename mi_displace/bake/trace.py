@@ -6,7 +6,7 @@ Mitsuba's acceleration structure:
 
 * **normal mode** — two rays, along +n from p - delta n and along -n from p + delta n, each
   within ``max_distance + delta`` (the paper's *maximum displacement*, §3.2 step 2b).
-  ``delta`` (1e-6 of the bounding-box diagonal by default) makes a high-poly surface that
+  ``delta`` (1e-5 of the bounding-box diagonal by default) makes a high-poly surface that
   passes exactly through p visible to both rays.
   **Hit rule.** A hit is *front-facing* when the high-poly face is oriented like the low-poly
   there (dot(face normal, n) > 0): the surface the ray is meant to measure.  The nearest

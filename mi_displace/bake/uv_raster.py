@@ -100,7 +100,8 @@ def rasterize_rows(layout: UVLayout, width: int, height: int, row0: int, rows: i
     added = 0
     if conservative:
         covered = dr.zeros(mi.UInt32, n_tex)
-        dr.scatter(covered, 1, texel_h)
+        if dr.width(texel_h):
+            dr.scatter(covered, 1, texel_h)
         t = dr.arange(mi.UInt32, n_tex)
         c, r = mi.Int32(t % width), mi.Int32(t // width)
         near = mi.Bool(False)
@@ -123,11 +124,12 @@ def rasterize_rows(layout: UVLayout, width: int, height: int, row0: int, rows: i
                 tri = dr.select(take, pc.prim_index, tri)
                 found |= take
             keep = dr.compress(found)
+            added = dr.width(keep)
+        if added:  # band texels whose corner probes found a triangle
             tri = dr.gather(mi.UInt32, tri, keep)
             centre = mi.Point2f((dr.gather(mi.Float, bc, keep) + 0.5) / width,
                                 1.0 - (dr.gather(mi.Float, br, keep) + 0.5) / height)
             cb1, cb2 = _clamped_barycentrics(layout, tri, centre)
-            added = dr.width(keep)
             texel_h = dr.concat([texel_h, dr.gather(mi.UInt32, band, keep)])
             prim = dr.concat([prim, tri])
             b1, b2 = dr.concat([b1, cb1]), dr.concat([b2, cb2])

@@ -134,3 +134,38 @@ def test_bad_parameters(variant):
                          ({"cage_offset": -0.1}, "cage_offset")):
         with pytest.raises(ValueError, match=name):
             bake(plane(z=0.01), plane(), **{"res": 4, **kwargs})
+
+
+def test_row_blocks_without_uv_charts(variant):
+    # the layout fills the bottom 10 % of a 2048^2 map: three of its four row blocks hold no
+    # chart at all; they come out empty, the covered rows measure the offset
+    low = plane(n=2)
+    low = MeshData(low.positions, low.faces, low.uvs * np.float32([1, 0.1]))
+    r = bake(plane(z=0.02, n=4), low, res=2048, max_distance=0.05, pad=0)
+    rows = np.nonzero(r.covered.any(1))[0]
+    assert rows.min() >= 2048 - 206 and r.covered[rows].all()
+    assert np.allclose(r.maps["displacement"][r.covered], 0.02, atol=1e-6)
+    assert np.all(r.maps["displacement"][~r.covered] == 0)
+    assert np.allclose(r.maps["normal_tangent"][~r.covered], [0, 0, 1])
+
+
+def test_chart_borders_on_texel_edges(variant):
+    # UVs in [0, 0.5]^2 at 64^2: the border runs along texel edges, so the conservative band
+    # texels' corner probes find no triangle (nothing to add, no crash)
+    low = plane(n=2)
+    r = bake(plane(z=0.02, n=4), MeshData(low.positions, low.faces, low.uvs * 0.5), res=64,
+             max_distance=0.05, pad=0)
+    assert r.record["counts"]["conservative_samples"] == 0
+    assert r.covered.sum() == 32 * 32 and np.allclose(r.maps["displacement"][r.covered], 0.02, atol=1e-6)
+
+
+def test_anti_aliased_texel_keeps_the_samples_that_hit(variant):
+    from mi_displace.bake.trace import MISS, OK
+
+    # the high-poly ends at x = 0.47: texel column 7 (x in [0.4375, 0.5]) has two sample
+    # columns, at 0.453 (hits) and 0.484 (misses)
+    high = plane(z=0.02, n=4)
+    high = MeshData(high.positions * np.float32([0.47, 1, 1]), high.faces, None)
+    r = bake(high, plane(n=2), res=16, aa=2, max_distance=0.05, pad=0, min_hit_fraction=0.25)
+    assert np.all(r.status[:, 7] == OK) and np.allclose(r.maps["displacement"][:, 7], 0.02, atol=1e-6)
+    assert np.all(r.status[:, 8:] == MISS)
