@@ -123,10 +123,7 @@ class DDM(mi.Mesh):
 
     def parameters_changed(self, keys=[]):
         if "time" in keys or "height" in keys:
-            for key, value in (("time", self.time), ("height", self.height)):
-                if not np.isfinite(value[0]):
-                    raise ValueError(f"ddm: '{key}' must be finite, got {value[0]}")
-            self._remap()
+            self._remap()    # DDMModel.map refuses non-finite values
         else:
             super().parameters_changed(keys)
 

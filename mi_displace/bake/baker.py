@@ -204,8 +204,10 @@ def _fill_empty(flat: mi.Float, first: int, n_tex: int, C: int, max_distance: fl
     -max_distance."""
     idx = dr.arange(mi.UInt32, n_tex * C)
     c = idx % C
-    value = dr.select((c == 3) | (c == 6) | (c == 9), 1.0, 0.0)
-    value = dr.select(c == 11, -max_distance, value)
+    value = mi.Float(0.0)
+    for name in ("normal_tangent", "normal_object", "direction_tangent"):
+        value = dr.select(c == Baker.CHANNELS[name][0] + 2, 1.0, value)     # the z component
+    value = dr.select(c == Baker.CHANNELS["back_depth"][0], -max_distance, value)
     dr.scatter(flat, value, idx + first * C)
 
 
