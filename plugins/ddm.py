@@ -113,8 +113,7 @@ class DDM(mi.Mesh):
                              "'w_offset' and the tile)")
         self.build_stats = {**self.model.stats(), "map_s": time.perf_counter() - start,
                             "bytes": self.model.memory_report()["mesh_bytes"]}
-        if self.model.maps is not None and not self.model.maps.valid.all():
-            self.build_stats["clamped_vertices"] = self.model.maps.clamped_count(uv.x, uv.y)
+        self.build_stats["clamped_vertices"] = self.model.clamped_count(uv)
 
     def traverse(self, cb):
         super().traverse(cb)

@@ -19,7 +19,7 @@ import numpy as np
 from mi_displace.core import surfaces
 from mi_displace.core.mesh_io import load_uv_mesh, resolve_path
 from mi_displace.ddm import animation as anim
-from mi_displace.ddm import base_maps, mapping
+from mi_displace.ddm import base_maps, charts, mapping
 from mi_displace.ddm.layout import make_layout
 from mi_displace.ddm.tiles import Tile, get_tile
 
@@ -147,16 +147,19 @@ class DDMModel:
                                  "converge with R; give an integer map_resolution")
             cfg.map_resolution, self.auto_trials = base_maps.choose_resolution(
                 self.base, cfg.tolerance, self._w_max())
-        need_maps = cfg.mode == "maps" or not self._all_valid_base()
-        if need_maps:
+        if cfg.mode == "maps":
             self.maps = base_maps.build_maps(self.base, cfg.map_resolution)
         self.pruned = 0
-        if self.maps is not None:
+        if not self._all_valid_base():
+            # decided on the exact mesh, the same in both modes: the reference does not move
+            # with map_resolution
+            layout, self.pruned = charts.prune_on_mesh(layout, self.tiles, self.base)
+        elif self.maps is not None:
             bounds = np.array([[*t.positions[:, :2].min(0), *t.positions[:, :2].max(0)]
                                for t in self.tiles])
             layout, self.pruned = base_maps.prune(layout, bounds, self.maps)
-            if layout.count == 0:
-                raise ValueError("ddm: every tile lies in the invalid region of the base map")
+        if layout.count == 0:
+            raise ValueError("ddm: every tile lies in the invalid region of the base map")
         self.layout = layout
         self.placement = mapping.Placement.from_layout(layout, len(self.tiles))
         self.buffers = mapping.TileBuffers.from_tiles(self.tiles)
@@ -248,6 +251,17 @@ class DDMModel:
         if getattr(self.base, "periodic_v", False):
             b1 = math.fmod(b1 * sv, 1.0) / sv
         return a, (b0, b1)
+
+    def clamped_count(self, uv) -> int:
+        """How many mapped vertices (their ``uv``, mi.Point2f) are clamped: off the mesh
+        base's UV layout (located exactly), or in an invalid texel of an analytic base's
+        maps (degenerate normals).  0 where nothing is clamped."""
+        if not self._all_valid_base():
+            valid, _, _, _ = self.base.locate(uv.x, uv.y)
+            return int(dr.count(~valid)[0])
+        if self.maps is not None and not self.maps.valid.all():
+            return self.maps.clamped_count(uv.x, uv.y)
+        return 0
 
     def memory_report(self) -> dict:
         """Bytes HDDM stores (tile(s) + offsets + maps) against the explicit mapped mesh."""
