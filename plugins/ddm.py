@@ -35,8 +35,8 @@ from mi_displace.ddm.animation import Animation
 from mi_displace.ddm.model import BASE_PARAMS, DDMConfig, DDMModel
 
 FLOAT_KEYS = ("gap_u", "gap_v", "w_offset", "u0", "v0", "height", "epsilon", "time", "tolerance")
-INT_KEYS = ("tiles_u", "tiles_v", "seed", "clamp_resolution")
-STRING_KEYS = ("base", "filename", "tile", "tile_target", "layout", "mode", "normals")
+INT_KEYS = ("tiles_u", "tiles_v", "seed")
+STRING_KEYS = ("base", "filename", "tile", "tile_target", "layout", "mode", "normals", "chart_border")
 ANIMATION_KEYS = ("velocity_u", "velocity_v", "rotation_rate", "w_amplitude", "w_frequency",
                   "alpha0", "alpha_rate")
 

@@ -103,6 +103,29 @@ def diffuse_fill(valid: np.ndarray, periodic_u: bool, periodic_v: bool):
     return src.reshape(rv, ru), sweeps
 
 
+def bilinear(position, normal, idx, wu, wv, su, sv, derivatives: bool):
+    """The §3.2 shader lookup from four texel indices ``idx`` (00, 10, 01, 11 in u, v) and
+    fractions ``wu``, ``wv``: bilinear P and N, plus (P_u, P_v, N_u, N_v) per unit uv
+    (``su``, ``sv``: texels per unit uv) when ``derivatives``."""
+    ps = [gather(mi.Vector3f, position, k) for k in idx]
+    ns = [gather(mi.Vector3f, normal, k) for k in idx]
+
+    def bilerp(c):
+        return dr.lerp(dr.lerp(c[0], c[1], wu), dr.lerp(c[2], c[3], wu), wv)
+
+    p, n = bilerp(ps), bilerp(ns)
+    if not derivatives:
+        return p, n
+
+    def d_du(c):
+        return ((c[1] - c[0]) * (1 - wv) + (c[3] - c[2]) * wv) * su
+
+    def d_dv(c):
+        return (dr.lerp(c[2], c[3], wu) - dr.lerp(c[0], c[1], wu)) * sv
+
+    return p, n, (d_du(ps), d_dv(ps), d_du(ns), d_dv(ns))
+
+
 @dataclass
 class GeometryImage:
     """The (P, N) texture pair of a base surface (§3.1).
@@ -158,26 +181,8 @@ class GeometryImage:
         iu0, iu1, wu, su = self._axis(u, self.ru, self.periodic_u)
         iv0, iv1, wv, sv = self._axis(v, self.rv, self.periodic_v)
         r0, r1 = iv0 * self.ru, iv1 * self.ru
-        idx = (r0 + iu0, r0 + iu1, r1 + iu0, r1 + iu1)
-        ps = [gather(mi.Vector3f, self.position, k) for k in idx]
-        ns = [gather(mi.Vector3f, self.normal, k) for k in idx]
-
-        def bilerp(c):
-            bottom = dr.lerp(c[0], c[1], wu)
-            top = dr.lerp(c[2], c[3], wu)
-            return dr.lerp(bottom, top, wv)
-
-        p, n = bilerp(ps), bilerp(ns)
-        if not derivatives:
-            return p, n
-
-        def d_du(c):
-            return ((c[1] - c[0]) * (1 - wv) + (c[3] - c[2]) * wv) * su
-
-        def d_dv(c):
-            return (dr.lerp(c[2], c[3], wu) - dr.lerp(c[0], c[1], wu)) * sv
-
-        return p, n, (d_du(ps), d_dv(ps), d_du(ns), d_dv(ns))
+        return bilinear(self.position, self.normal, (r0 + iu0, r0 + iu1, r1 + iu0, r1 + iu1),
+                        wu, wv, su, sv, derivatives)
 
     def clamped_count(self, u: mi.Float, v: mi.Float) -> int:
         """How many of the points (u, v) fall in an invalid texel (nearest texel), i.e. are

@@ -26,12 +26,15 @@ class Layout:
         tile_index: (I,) int64 index into the tile set.
         size: (su, sv) uv extent of the canonical unit square.
         cells: (n, m) tiles along u and v (before pruning).
+        chart: (I,) int64 UV chart each tile belongs to (mesh bases,
+            :func:`mi_displace.ddm.charts.assign_charts`), else None.
     """
 
     offsets: np.ndarray
     tile_index: np.ndarray
     size: tuple[float, float]
     cells: tuple[int, int]
+    chart: np.ndarray | None = None
 
     @property
     def count(self) -> int:
@@ -39,7 +42,8 @@ class Layout:
 
     def subset(self, keep: np.ndarray) -> "Layout":
         """The layout restricted to the tiles where ``keep`` (bool (I,)) is True."""
-        return Layout(self.offsets[keep], self.tile_index[keep], self.size, self.cells)
+        return Layout(self.offsets[keep], self.tile_index[keep], self.size, self.cells,
+                      None if self.chart is None else self.chart[keep])
 
 
 def _check_int(name: str, value, low: int = 1) -> int:

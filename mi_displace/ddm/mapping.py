@@ -55,26 +55,31 @@ class TileBuffers:
 
 
 class ExactEvaluator:
-    """S, n and derivatives straight from the base (DDM, eq. 1)."""
+    """S, n and derivatives straight from the base (DDM, eq. 1).  On a mesh base with UV
+    charts each point stays in the chart its tile belongs to (``chart``, mi.UInt32 per
+    point)."""
 
     def __init__(self, base):
         self.base = base
 
-    def __call__(self, u, v, derivatives: bool):
-        s = self.base.sample(u, v)
+    def __call__(self, u, v, derivatives: bool, chart=None):
+        s = self.base.sample(u, v) if chart is None else self.base.sample_chart(u, v, chart)
         if not derivatives:
             return mi.Vector3f(s.p), s.n
         return mi.Vector3f(s.p), s.n, (s.dp_du, s.dp_dv, s.dn_du, s.dn_dv)
 
 
 class MapsEvaluator:
-    """P, N and derivatives from the geometry image (HDDM, eq. 2, §3.2 lookup)."""
+    """P, N and derivatives from the geometry image (HDDM, eq. 2, §3.2 lookup); per-chart
+    maps (:class:`~mi_displace.ddm.charts.ChartMaps`) read the tile's own chart."""
 
     def __init__(self, maps):
         self.maps = maps
 
-    def __call__(self, u, v, derivatives: bool):
-        return self.maps.lookup(u, v, derivatives)
+    def __call__(self, u, v, derivatives: bool, chart=None):
+        if chart is None:
+            return self.maps.lookup(u, v, derivatives)
+        return self.maps.lookup(u, v, derivatives, chart)
 
 
 @dataclass
@@ -90,6 +95,7 @@ class Placement:
     offsets: mi.Point2f
     groups: list
     size: tuple
+    chart: mi.UInt32 | None = None
 
     @staticmethod
     def from_layout(layout, n_tiles: int) -> "Placement":
@@ -102,25 +108,32 @@ class Placement:
             if count:
                 groups.append((first, count, k))
             first += count
+        chart = None if layout.chart is None else mi.UInt32(layout.chart[order].astype(np.uint32))
         return Placement(mi.Point2f(mi.Float(off[:, 0].astype(np.float32)),
                                     mi.Float(off[:, 1].astype(np.float32))),
-                         groups, tuple(float(s) for s in layout.size))
+                         groups, tuple(float(s) for s in layout.size), chart)
+
+    def instance_chart(self, inst: mi.UInt32):
+        """The UV chart of each point's tile instance (mi.UInt32), None without charts."""
+        return None if self.chart is None else dr.gather(mi.UInt32, self.chart, inst)
 
     def vertex_total(self, buffers: TileBuffers) -> int:
         return sum(c * buffers.vertex_count[k] for _, c, k in self.groups)
 
 
-def orientation(base, placement: "Placement") -> mi.Float:
+def orientation(exact: ExactEvaluator, placement: "Placement") -> mi.Float:
     """Per placed tile: +1 where the base's parametrisation keeps the tile's orientation, -1
-    where it mirrors it — the sign of (S_u x S_v) . n at the tile's centre.  Analytic bases
-    give one sign; a mesh base's UV charts may be mirrored one by one.
+    where it mirrors it — the sign of (S_u x S_v) . n at the tile's centre (on the exact
+    base, in the tile's own chart).  Analytic bases give one sign; a mesh base's UV charts
+    may be mirrored one by one.
 
     Returns:
         mi.Float (I,), one sign per instance (placement order).
     """
     su, sv = placement.size
-    s = base.sample(placement.offsets.x + 0.5 * su, placement.offsets.y + 0.5 * sv)
-    det = dr.dot(dr.cross(s.dp_du, s.dp_dv), s.n)
+    _, n, (s_u, s_v, _, _) = exact(placement.offsets.x + 0.5 * su, placement.offsets.y + 0.5 * sv,
+                                   True, placement.chart)
+    det = dr.dot(dr.cross(s_u, s_v), n)
     sign = dr.select(det >= 0, 1.0, -1.0)
     dr.eval(sign)
     return sign
@@ -170,7 +183,7 @@ def instance_faces(placement: Placement, buffers: TileBuffers, tile_faces: list,
     return mi.Vector3u(*(dr.concat([o[c] for o in out]) for c in range(3)))
 
 
-def _instance_vertex(placement: Placement, buffers: TileBuffers):
+def instance_vertex(placement: Placement, buffers: TileBuffers):
     """Per output vertex: (instance index, tile vertex index), one Dr.Jit expression."""
     total = placement.vertex_total(buffers)
     i = dr.arange(mi.UInt32, total)
@@ -215,7 +228,8 @@ def map_tiles(evaluator, placement: Placement, buffers: TileBuffers, affine, hei
     """
     if method not in nrm.METHODS:
         raise ValueError(f"ddm: unknown 'normals' {method!r}; expected one of {', '.join(nrm.METHODS)}")
-    inst, k = _instance_vertex(placement, buffers)
+    inst, k = instance_vertex(placement, buffers)
+    chart = placement.instance_chart(inst)
     tp, tn, t1, t2 = tile_override or (buffers.positions, buffers.normals, buffers.t1, buffers.t2)
     vp = gather(mi.Vector3f, tp, k)
     vn = gather(mi.Vector3f, tn, k)
@@ -235,19 +249,19 @@ def map_tiles(evaluator, placement: Placement, buffers: TileBuffers, affine, hei
 
     def T(p):
         u, v, w = place(p)
-        s, n = evaluator(u, v, False)
+        s, n = evaluator(u, v, False, chart)
         return s + n * w
 
     u, v, w = place(vp)
     if method == "jacobian":
-        s, n, (s_u, s_v, n_u, n_v) = evaluator(u, v, True)
+        s, n, (s_u, s_v, n_u, n_v) = evaluator(u, v, True, chart)
         pos = s + n * w
         t_u, t_v = s_u + n_u * w, s_v + n_v * w       # dT/du, dT/dv; dT/dw = n
         a_x = (su * a00) * t_u + (sv * a10) * t_v
         a_y = (su * a01) * t_u + (sv * a11) * t_v
         normal = sign * nrm.cofactor_normal(a_x, a_y, height * n, vn)
     else:
-        s, n = evaluator(u, v, False)
+        s, n = evaluator(u, v, False, chart)
         pos = s + n * w
         if method == "tangent":   # §3.2: map the two precomputed tangent points
             normal = sign * dr.cross(T(vp + eps * gather(mi.Vector3f, t1, k)) - pos,

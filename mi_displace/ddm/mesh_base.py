@@ -7,9 +7,16 @@ barycentrics for any number of points at once (Mitsuba as a rasteriser in UV spa
 ``sample(u, v)`` gives the piecewise-linear position S, the interpolated unit normal n and
 their exact per-triangle derivatives, so ``exact`` mode and ``jacobian`` normals work on it.
 
+UV charts: the layout mesh lies at height z = chart index (charts are the connected pieces
+of the welded UV layout, :func:`mi_displace.ddm.charts.uv_charts`), so a ray segment of
+length 1 from z = c + 1/2 finds a point *in chart c only* (:meth:`MeshBase.locate` with
+``chart``).
+
 Points outside the layout (invalid) are clamped to the nearest valid location, as the
-paper does: the nearest covered texel of a ``clamp_resolution``² validity map, found by the
-§4.1 diffusion (:func:`mi_displace.ddm.base_maps.diffuse_fill`).
+paper does (§4.1), but exactly: the closest point of the layout's boundary edges in UV
+(a Dr.Jit loop over the edges of the point's chart, :meth:`MeshBase.clamp`), whose
+triangle and barycentrics follow from the edge.  :meth:`MeshBase.sample_chart` clamps
+to the point's own chart, so a tile's vertices never jump to a neighbouring chart.
 """
 from __future__ import annotations
 
@@ -47,23 +54,40 @@ class MeshBase(BaseSurface):
 
     Args:
         positions, normals: (V, 3) float; uvs: (V, 2) float; faces: (F, 3) int.
-        clamp_resolution: texels per side of the validity map used to clamp queries that
-            fall outside the UV layout to the nearest valid location.
     """
 
     name = "mesh"
 
-    def __init__(self, positions, normals, uvs, faces, clamp_resolution: int = 512):
+    def __init__(self, positions, normals, uvs, faces):
         pos = np.asarray(positions, np.float64)
         nrm = np.asarray(normals, np.float64)
         uv = np.asarray(uvs, np.float64)
         f = np.asarray(faces, np.int64)
         self.faces_np, self.uvs_np, self.positions_np = f, uv, pos
         self.face_count = len(f)
+        from mi_displace.ddm.charts import chart_boundaries, uv_charts
+
+        self.face_chart, self.chart_count, welded = uv_charts(pos, uv, f)
+        # boundary edges of every chart, grouped by chart: face, its two corners (0..2)
+        face, c0, c1, first = chart_boundaries(welded, self.face_chart, self.chart_count)
+        self._edge_first = mi.UInt32(first.astype(np.uint32))   # (C + 1,) range per chart
+        self._edge_face = mi.UInt32(face.astype(np.uint32))
+        self._edge_corners = (mi.UInt32(c0.astype(np.uint32)), mi.UInt32(c1.astype(np.uint32)))
+        ends = [uv[f[face, c]] for c in (c0, c1)]
+        self._edge_uv = tuple(mi.Point2f(mi.Float(e[:, 0].astype(np.float32)),
+                                         mi.Float(e[:, 1].astype(np.float32))) for e in ends)
+        self.boundary_edges = len(face)
+        vertex_chart = np.zeros(len(uv), np.int64)
+        vertex_chart[f.ravel()] = np.repeat(self.face_chart, 3)
+        #: (C, 4) u_min, v_min, u_max, v_max of each chart's UV image
+        self.chart_bounds = np.array([[*uv[f[self.face_chart == c]].reshape(-1, 2).min(0),
+                                       *uv[f[self.face_chart == c]].reshape(-1, 2).max(0)]
+                                      for c in range(self.chart_count)])
         layout = mi.Mesh("ddm_uv_layout", len(uv), len(f), mi.Properties(), False, False)
         params = mi.traverse(layout)
         params["vertex_positions"] = dr.ravel(mi.Point3f(
-            mi.Float(uv[:, 0].astype(np.float32)), mi.Float(uv[:, 1].astype(np.float32)), 0))
+            mi.Float(uv[:, 0].astype(np.float32)), mi.Float(uv[:, 1].astype(np.float32)),
+            mi.Float(vertex_chart.astype(np.float32))))
         params["faces"] = mi.UInt32(f.astype(np.uint32).ravel())
         params.update()
         self._scene = mi.load_dict({"type": "scene", "layout": layout})
@@ -81,13 +105,15 @@ class MeshBase(BaseSurface):
         self._kappa = float(np.max(self.edge_kappa))
         ext = pos.max(0) - pos.min(0)
         self._extent = (float(np.linalg.norm(ext)), float(np.linalg.norm(ext)))
-        self.clamp_resolution = int(clamp_resolution)
-        self._clamp_uv = None
 
-    def locate(self, u: mi.Float, v: mi.Float):
-        """Triangle and barycentrics under each (u, v): ``(valid, prim, b1, b2)``."""
+    def locate(self, u: mi.Float, v: mi.Float, chart: mi.UInt32 | None = None):
+        """Triangle and barycentrics under each (u, v): ``(valid, prim, b1, b2)``; with
+        ``chart`` (per point) only that chart's triangles count."""
         n = dr.width(u)
-        ray = mi.Ray3f(mi.Point3f(u, v, 1.0), dr.zeros(mi.Vector3f, n) + mi.Vector3f(0, 0, -1))
+        top = self.chart_count + 0.5 if chart is None else mi.Float(chart) + 0.5
+        ray = mi.Ray3f(mi.Point3f(u, v, top), dr.zeros(mi.Vector3f, n) + mi.Vector3f(0, 0, -1))
+        if chart is not None:
+            ray.maxt = 1.0          # the slab of chart c only: z in [c - 1/2, c + 1/2]
         pi = self._scene.ray_intersect_preliminary(ray, coherent=False)
         # every field in one kernel: evaluated one by one, each would trace the rays again
         dr.eval(pi.valid, pi.prim_index, pi.prim_uv)
@@ -105,34 +131,51 @@ class MeshBase(BaseSurface):
             + gather(mi.Vector3f, self._n, i2) * b2
         return p, nn
 
-    def clamp_map(self):
-        """(R, R, 2) float32 uv of the nearest valid sample for every texel of the clamp map."""
-        if self._clamp_uv is None:
-            from mi_displace.ddm.base_maps import diffuse_fill, texel_coordinates
+    def clamp(self, u, v, chart: mi.UInt32 | None = None):
+        """The closest point of the UV layout's boundary (of ``chart``'s boundary per point,
+        or of every chart) to each (u, v): ``(prim, b1, b2)`` on the edge's triangle.
 
-            r = self.clamp_resolution
-            u, v = texel_coordinates(r, r, False, False)
-            valid, _, _, _ = self.locate(u, v)
-            ok = np.asarray(valid).reshape(r, r)
-            if not ok.any():
-                raise ValueError("ddm: the base mesh's UV layout covers no part of [0, 1]^2")
-            src, _ = diffuse_fill(ok, False, False)
-            uu, vv = np.asarray(u).reshape(r, r), np.asarray(v).reshape(r, r)
-            self._clamp_uv = (mi.Float(uu.ravel()[src.ravel()]), mi.Float(vv.ravel()[src.ravel()]))
-        return self._clamp_uv
+        A Dr.Jit loop over the boundary edges of the point's chart (§4.1: clamp "toward the
+        nearest valid location", exactly rather than by diffusion on a grid).
+        """
+        n = dr.width(u)
+        lo = dr.zeros(mi.UInt32, n) if chart is None else dr.gather(mi.UInt32, self._edge_first, chart)
+        hi = (dr.zeros(mi.UInt32, n) + self.boundary_edges if chart is None
+              else dr.gather(mi.UInt32, self._edge_first, chart + 1))
+        p = mi.Point2f(u, v)
+        best_d = dr.full(mi.Float, dr.inf, n)
+        best_e, best_t = dr.zeros(mi.UInt32, n), dr.zeros(mi.Float, n)
+
+        def body(i, best_d, best_e, best_t):
+            a, b = (dr.gather(mi.Point2f, e, i) for e in self._edge_uv)
+            ab = b - a
+            t = dr.clip(dr.dot(p - a, ab) / dr.maximum(dr.squared_norm(ab), 1e-30), 0.0, 1.0)
+            d = dr.squared_norm(a + ab * t - p)
+            closer = d < best_d
+            return (i + 1, dr.select(closer, d, best_d), dr.select(closer, i, best_e),
+                    dr.select(closer, t, best_t))
+
+        _, _, best_e, best_t = dr.while_loop((lo, best_d, best_e, best_t),
+                                             lambda i, *_: i < hi, body)
+        prim = dr.gather(mi.UInt32, self._edge_face, best_e)
+        c0, c1 = (dr.gather(mi.UInt32, c, best_e) for c in self._edge_corners)
+
+        def weight(k):
+            return dr.select(c0 == k, 1 - best_t, 0.0) + dr.select(c1 == k, best_t, 0.0)
+
+        return prim, weight(1), weight(2)
 
     def sample(self, u, v):
+        return self.sample_chart(u, v, None)
+
+    def sample_chart(self, u, v, chart: mi.UInt32 | None) -> SurfaceSample:
+        """S, n and derivatives at (u, v) in UV chart ``chart`` (mi.UInt32 per point; None:
+        any chart): points outside it are clamped to the chart's nearest boundary point
+        (:meth:`clamp`), never to another chart."""
         u, v = mi.Float(u), mi.Float(v)
-        valid, prim, b1, b2 = self.locate(u, v)
-        if not dr.all(valid):  # clamp to the nearest valid location (§4.1)
-            cu, cv = self.clamp_map()
-            r = self.clamp_resolution
-            iu = mi.UInt32(dr.clip(dr.round(u * (r - 1)), 0, r - 1))
-            iv = mi.UInt32(dr.clip(dr.round(v * (r - 1)), 0, r - 1))
-            k = iv * r + iu
-            u = dr.select(valid, u, dr.gather(mi.Float, cu, k))
-            v = dr.select(valid, v, dr.gather(mi.Float, cv, k))
-            valid2, prim2, c1, c2 = self.locate(u, v)
+        valid, prim, b1, b2 = self.locate(u, v, chart)
+        if not dr.all(valid):
+            prim2, c1, c2 = self.clamp(u, v, chart)
             prim = dr.select(valid, prim, prim2)
             b1, b2 = dr.select(valid, b1, c1), dr.select(valid, b2, c2)
         return self._sample_at(prim, b1, b2)

@@ -35,7 +35,7 @@ class FoldingWarning(UserWarning):
     """w exceeds the base's radius of curvature: the mapped volume folds over itself."""
 
 
-def make_base(name: str, filename: str | None = None, clamp_resolution: int = 512, **params):
+def make_base(name: str, filename: str | None = None, **params):
     """A DDM base: ``plane``/``sphere``/``cylinder``/``torus`` (analytic), ``teapot`` (the
     Utah teapot body, Bezier patches) or ``mesh`` (``filename``: OBJ/PLY with UVs)."""
     if name == "teapot":
@@ -48,8 +48,7 @@ def make_base(name: str, filename: str | None = None, clamp_resolution: int = 51
         if not filename:
             raise ValueError("ddm: base 'mesh' needs a 'filename' (PLY/OBJ with UVs)")
         pos, nrm, uvs, faces = load_uv_mesh(filename, "ddm")
-        return MeshBase(pos, nrm, uvs, faces, base_maps.check_resolution(
-            clamp_resolution, "clamp_resolution"))
+        return MeshBase(pos, nrm, uvs, faces)
     return surfaces.make_base(name, **params)
 
 
@@ -80,7 +79,7 @@ class DDMConfig:
     mode: str = "maps"
     map_resolution: int | str = 256     # or "auto": smallest R meeting 'tolerance'
     tolerance: float = 1e-4             # auto: max mapped-point error / base diagonal
-    clamp_resolution: int = 512         # mesh bases, exact mode: nearest-valid clamp map
+    chart_border: str = "clamp"         # mesh bases: tiles across UV charts clamp | drop
     normals: str = "tangent"
     epsilon: float = 1e-3               # [tile units]
     time: float = 0.0
@@ -136,7 +135,7 @@ class DDMModel:
                     for k, t in enumerate(self.tiles))
         mapping.check_size(verts, faces, what)
         self.base = base if base is not None else make_base(
-            cfg.base, cfg.filename, cfg.clamp_resolution, **cfg.base_params)
+            cfg.base, cfg.filename, **cfg.base_params)
         self._warn_folding()
         self.maps = None
         self.auto_trials = None
@@ -147,33 +146,47 @@ class DDMModel:
                                  "converge with R; give an integer map_resolution")
             cfg.map_resolution, self.auto_trials = base_maps.choose_resolution(
                 self.base, cfg.tolerance, self._w_max())
-        if cfg.mode == "maps":
-            self.maps = base_maps.build_maps(self.base, cfg.map_resolution)
         self.pruned = 0
+        self.chart_stats = {}
         if not self._all_valid_base():
             # decided on the exact mesh, the same in both modes: the reference does not move
-            # with map_resolution
-            layout, self.pruned = charts.prune_on_mesh(layout, self.tiles, self.base)
-        elif self.maps is not None:
+            # with map_resolution; every tile keeps to one UV chart
+            layout, self.chart_stats = charts.assign_charts(layout, self.tiles, self.base,
+                                                            cfg.chart_border)
+            self.pruned = self.chart_stats["tiles_pruned"]
+            if layout.count == 0:
+                raise ValueError("ddm: no tile touches the base mesh's UV layout")
+            self.reach = charts.tile_reach(self.tiles, layout.size)
+        if cfg.mode == "maps":
+            self.maps = self.maps_at(cfg.map_resolution)
+        if self._all_valid_base() and self.maps is not None:
             bounds = np.array([[*t.positions[:, :2].min(0), *t.positions[:, :2].max(0)]
                                for t in self.tiles])
             layout, self.pruned = base_maps.prune(layout, bounds, self.maps)
-        if layout.count == 0:
-            raise ValueError("ddm: every tile lies in the invalid region of the base map")
+            if layout.count == 0:
+                raise ValueError("ddm: every tile lies in the invalid region of the base map")
         self.layout = layout
         self.placement = mapping.Placement.from_layout(layout, len(self.tiles))
         self.buffers = mapping.TileBuffers.from_tiles(self.tiles)
-        self.chart_orientation = mapping.orientation(self.base, self.placement)
+        self.exact = mapping.ExactEvaluator(self.base)
+        self.chart_orientation = mapping.orientation(self.exact, self.placement)
         self.faces_sign = 0.0          # sign of the w scale the faces are wound for
         self.faces_version = 0         # bumped whenever the faces are rebuilt
         self._wind_faces(_sign(cfg.height * cfg.animation.w_factor(cfg.time)))
         if self.target is not None:
             self._target = mapping.TileBuffers.from_tiles([self.target])
-        self.evaluator = (mapping.MapsEvaluator(self.maps) if cfg.mode == "maps"
-                          else mapping.ExactEvaluator(self.base))
+        self.evaluator = mapping.MapsEvaluator(self.maps) if cfg.mode == "maps" else self.exact
         self.vertex_count = self.placement.vertex_total(self.buffers)
         self.face_count = dr.width(self.faces)
         self.build_s = time.perf_counter() - start
+
+    def maps_at(self, resolution: int):
+        """The geometry images of this model's base at ``resolution``: one pair of maps on
+        analytic / Bezier bases, per-chart maps (:class:`~mi_displace.ddm.charts.ChartMaps`)
+        on mesh bases."""
+        if self._all_valid_base():
+            return base_maps.build_maps(self.base, resolution)
+        return charts.ChartMaps(self.base, base_maps.check_resolution(resolution), self.reach)
 
     def _wind_faces(self, sign: float) -> None:
         """(Re)build the faces for a w scale of this sign: a negative scale mirrors every
@@ -253,11 +266,12 @@ class DDMModel:
         return a, (b0, b1)
 
     def clamped_count(self, uv) -> int:
-        """How many mapped vertices (their ``uv``, mi.Point2f) are clamped: off the mesh
-        base's UV layout (located exactly), or in an invalid texel of an analytic base's
-        maps (degenerate normals).  0 where nothing is clamped."""
+        """How many mapped vertices (their ``uv``, mi.Point2f, one per mapped vertex) are
+        clamped: off their tile's own UV chart of a mesh base (located exactly), or in an
+        invalid texel of an analytic base's maps (degenerate normals)."""
         if not self._all_valid_base():
-            valid, _, _, _ = self.base.locate(uv.x, uv.y)
+            inst, _ = mapping.instance_vertex(self.placement, self.buffers)
+            valid, _, _, _ = self.base.locate(uv.x, uv.y, self.placement.instance_chart(inst))
             return int(dr.count(~valid)[0])
         if self.maps is not None and not self.maps.valid.all():
             return self.maps.clamped_count(uv.x, uv.y)
@@ -276,8 +290,8 @@ class DDMModel:
     def stats(self) -> dict:
         """Build figures for ``build_stats`` / the report."""
         s = {"mode": self.cfg.mode, "tiles_placed": self.layout.count, "tiles_pruned": self.pruned,
-             "vertices": self.vertex_count, "faces": self.face_count, "build_s": self.build_s,
-             **self.memory_report()}
+             **self.chart_stats, "vertices": self.vertex_count, "faces": self.face_count,
+             "build_s": self.build_s, **self.memory_report()}
         if self.maps is not None:
             s.update(map_resolution=self.maps.ru, **self.maps.stats)
         if self.auto_trials is not None:
