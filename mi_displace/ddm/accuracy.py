@@ -47,20 +47,73 @@ def geometric_accuracy(cfg: DDMConfig, resolutions=RESOLUTIONS, method: str | No
     """
     cfg.mode = "exact"
     model = DDMModel(cfg)
-    p_ref, n_ref, _ = model.map(method="jacobian")
+    p_ref, n_ref, uv = model.map(method="jacobian")
     ref = _np3(p_ref)
     diag = float(np.linalg.norm(ref.max(0) - ref.min(0)))
+    clamped = model.clamped_mask(uv)
     rows = []
     for r in resolutions:
-        maps = base_maps.build_maps(model.base, r)
+        maps = model.maps_at(r)
         p, n, _ = model.map(method=method, evaluator=mapping.MapsEvaluator(maps))
-        d = np.linalg.norm(_np3(p) - ref, axis=1)
+        p = _np3(p)
+        d = np.linalg.norm(p - ref, axis=1)
         ang = np.asarray(nrm.angle_error_deg(n, n_ref))
-        rows.append({"resolution": r, "rms_error_rel": float(np.sqrt(np.mean(d * d)) / diag),
-                     "max_error_rel": float(d.max() / diag), "normal_mean_deg": float(ang.mean()),
-                     "normal_max_deg": float(ang.max()), "maps_bytes": maps.nbytes,
-                     "vertices": len(d)})
+        row = {"resolution": r, "rms_error_rel": float(np.sqrt(np.mean(d * d)) / diag),
+               "max_error_rel": float(d.max() / diag), "normal_mean_deg": float(ang.mean()),
+               "normal_max_deg": float(ang.max()), "maps_bytes": maps.nbytes, "vertices": len(d)}
+        if clamped.any():   # mesh bases: vertices on their chart vs clamped ones
+            row.update(unclamped_max_rel=float(d[~clamped].max() / diag),
+                       clamped_p99_rel=float(np.percentile(d[clamped], 99) / diag),
+                       clamped_fraction=float(clamped.mean()),
+                       **_stretch(p, model.buffers.vertex_count))
+        rows.append(row)
     return rows
+
+
+def _stretch(p: np.ndarray, vertex_count: list) -> dict:
+    """Largest mapped tile extent (bbox diagonal) over the median, and how many tiles are
+    more than 3x the median (one tile kind)."""
+    if len(vertex_count) != 1:
+        return {}
+    extent = np.linalg.norm(np.ptp(p.reshape(-1, vertex_count[0], 3), 1), axis=1)
+    med = np.median(extent)
+    return {"tile_extent_max_over_median": float(extent.max() / med),
+            "tiles_over_3x_median": int((extent > 3 * med).sum())}
+
+
+#: the mesh bases of the UV-chart table: Spot (13 charts) and the xatlas genus-1 mesh
+ROOT = Path(__file__).resolve().parents[2]
+CHART_BASES = {
+    "spot": dict(base="mesh", filename=str(ROOT / "data" / "spot" / "spot_triangulated.obj"),
+                 tile="chain", tiles_u=32, tiles_v=32, height=0.03),
+    "genus1": dict(base="mesh", filename=str(ROOT / "scenes" / "parts" / "ddm_genus1" / "genus1.obj"),
+                   tile="chain", tiles_u=32, tiles_v=32, height=0.05),
+}
+
+
+def chart_accuracy(out_dir, resolutions=(32, 64, 128, 256, 512, 1024)) -> dict:
+    """``maps`` against ``exact`` on the mesh bases of :data:`CHART_BASES` (chains, 32 x 32
+    cells): RMS, max, the largest error of vertices on their own chart, the 99th percentile
+    of clamped ones, tile stretch; writes ``ddm_charts.json`` / ``ddm_charts.md``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    record, md = {"variant": mi.variant()}, ""
+    for name, kw in CHART_BASES.items():
+        model = DDMModel(DDMConfig(mode="exact", **kw))
+        rows = geometric_accuracy(DDMConfig(**kw), resolutions)
+        record[name] = {"build_stats": model.stats(), "rows": rows}
+        st = model.stats()
+        md += (f"## {name}: {st['charts']} charts, {st['tiles_placed']} tiles "
+               f"({st['tiles_pruned']} pruned, {st['tiles_straddling']} straddling)\n\n")
+        md += _markdown(rows, [
+            ("map_resolution", "resolution", "d"), ("RMS / diag", "rms_error_rel", ".2e"),
+            ("max / diag", "max_error_rel", ".2e"), ("unclamped max", "unclamped_max_rel", ".2e"),
+            ("clamped p99", "clamped_p99_rel", ".2e"),
+            ("tile extent max / median", "tile_extent_max_over_median", ".1f"),
+            ("maps bytes", "maps_bytes", ",")]) + "\n"
+    (out / "ddm_charts.json").write_text(json.dumps(record, indent=2))
+    (out / "ddm_charts.md").write_text(md)
+    return record
 
 
 def normal_methods(cfg: DDMConfig) -> list[dict]:

@@ -5,7 +5,8 @@
   and each frame is written as ``DIR/frame_NNNN.png``.
 * ``ddm-figures [--out DIR] [--quick]`` writes the accuracy table and plot (``maps`` at
   32...1024 against ``exact``), the normal-method table and the ``map_resolution`` sweep of
-  ``scenes/ddm_thorns_sphere.xml`` (default ``docs/figures``).
+  ``scenes/ddm_thorns_sphere.xml`` (default ``docs/figures``); ``--charts``: only the
+  UV-chart table (``maps`` against ``exact`` on two mesh bases, ``ddm_charts.md``).
 """
 from __future__ import annotations
 
@@ -34,8 +35,12 @@ def _cmd_animate(args) -> int:
 
 
 def _cmd_figures(args) -> int:
-    from mi_displace.ddm.accuracy import write_figures
+    from mi_displace.ddm.accuracy import chart_accuracy, write_figures
 
+    if args.charts:
+        chart_accuracy(args.out)
+        print((args.out / "ddm_charts.md").read_text())
+        return 0
     record = write_figures(args.out, ROOT / "scenes" / "ddm_thorns_sphere.xml", quick=args.quick)
     for row in record["accuracy"]:
         print(f"R={row['resolution']:5d}  rms/diag {row['rms_error_rel']:.3g}  "
@@ -60,4 +65,6 @@ def add_commands(sub) -> dict:
     p = sub.add_parser("ddm-figures", help="DDM accuracy table/plot and map_resolution sweep")
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "figures", help="output folder")
     p.add_argument("--quick", action="store_true", help="fewer resolutions, low-spp reference")
+    p.add_argument("--charts", action="store_true",
+                   help="only the UV-chart table (maps vs exact on Spot and the genus-1 mesh)")
     return {"ddm-animate": _cmd_animate, "ddm-figures": _cmd_figures}

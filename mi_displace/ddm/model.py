@@ -265,17 +265,24 @@ class DDMModel:
             b1 = math.fmod(b1 * sv, 1.0) / sv
         return a, (b0, b1)
 
-    def clamped_count(self, uv) -> int:
-        """How many mapped vertices (their ``uv``, mi.Point2f, one per mapped vertex) are
-        clamped: off their tile's own UV chart of a mesh base (located exactly), or in an
-        invalid texel of an analytic base's maps (degenerate normals)."""
+    def clamped_mask(self, uv) -> np.ndarray:
+        """Per mapped vertex (``uv``: mi.Point2f, one per mapped vertex), whether it is
+        clamped: off its tile's own UV chart of a mesh base (located exactly), or in an
+        invalid texel of an analytic base's maps (degenerate normals).  (V,) bool."""
         if not self._all_valid_base():
             inst, _ = mapping.instance_vertex(self.placement, self.buffers)
             valid, _, _, _ = self.base.locate(uv.x, uv.y, self.placement.instance_chart(inst))
-            return int(dr.count(~valid)[0])
+            return ~np.asarray(valid)
         if self.maps is not None and not self.maps.valid.all():
+            return ~self.maps.texel_valid(np.asarray(uv.x), np.asarray(uv.y))
+        return np.zeros(dr.width(uv), bool)
+
+    def clamped_count(self, uv) -> int:
+        """How many mapped vertices are clamped (:meth:`clamped_mask`; Dr.Jit count on
+        analytic maps)."""
+        if self._all_valid_base() and self.maps is not None:
             return self.maps.clamped_count(uv.x, uv.y)
-        return 0
+        return int(self.clamped_mask(uv).sum())
 
     def memory_report(self) -> dict:
         """Bytes HDDM stores (tile(s) + offsets + maps) against the explicit mapped mesh."""
