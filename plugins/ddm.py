@@ -34,7 +34,8 @@ import numpy as np
 from mi_displace.ddm.animation import Animation
 from mi_displace.ddm.model import BASE_PARAMS, DDMConfig, DDMModel
 
-FLOAT_KEYS = ("gap_u", "gap_v", "w_offset", "u0", "v0", "height", "epsilon", "time", "tolerance")
+FLOAT_KEYS = ("gap_u", "gap_v", "w_offset", "u0", "v0", "height", "epsilon", "time", "tolerance",
+              "dicing_rate")
 INT_KEYS = ("tiles_u", "tiles_v", "seed")
 STRING_KEYS = ("base", "filename", "tile", "tile_target", "layout", "mode", "normals", "chart_border")
 ANIMATION_KEYS = ("velocity_u", "velocity_v", "rotation_rate", "w_amplitude", "w_frequency",
@@ -114,6 +115,20 @@ class DDM(mi.Mesh):
         self.build_stats = {**self.model.stats(), "map_s": time.perf_counter() - start,
                             "bytes": self.model.memory_report()["mesh_bytes"]}
         self.build_stats["clamped_vertices"] = self.model.clamped_count(uv)
+
+    def fit_to_scene(self, scene) -> bool:
+        """``map_resolution="auto"``: re-derive R from this shape's screen footprint in the
+        scene's sensors (:meth:`DDMModel.fit_to_sensors`) and re-map through the scene's
+        parameters, so that its acceleration structure follows.  Called by
+        :func:`mi_displace.render.scene.load`; returns True when the maps changed."""
+        if not self.model.fit_to_sensors(scene.sensors(), self.to_world):
+            self.build_stats.update(self.model.stats())
+            return False
+        params = mi.traverse(scene)
+        key = next(k for k in params.keys() if k.endswith(".height") and params.properties[k][2] is self)
+        params.set_dirty(key)
+        params.update()
+        return True
 
     def traverse(self, cb):
         super().traverse(cb)

@@ -334,12 +334,17 @@ def map_error(base, maps: GeometryImage, w_max: float, samples: int = 1 << 16, s
 AUTO_MAX_RESOLUTION = 2048
 
 
-def choose_resolution(base, tolerance: float, w_max: float, start: int = 32) -> tuple[int, list]:
+def choose_resolution(base, tolerance: float, w_max: float, start: int = 32, build=None,
+                      error=None, order: float = 2.0) -> tuple[int, list]:
     """The smallest power-of-two ``map_resolution`` whose mapped points stay within
-    ``tolerance`` x (bounding-box diagonal of the base) of the exact ones (:func:`map_error`).
+    ``tolerance`` x (bounding-box diagonal of the base) of the exact ones (``error``, by
+    default :func:`map_error`, of the maps ``build(r)`` makes, by default
+    :func:`build_maps`; mesh bases pass the per-chart pair of
+    :mod:`mi_displace.ddm.charts`).
 
-    Bilinear geometry images err as 1/R^2 (measured, docs/ddm.md), so one measurement at
-    ``start`` predicts R; the prediction is checked, doubled until it holds (at most
+    Bilinear geometry images of a smooth base err as 1/R^``order`` (2, measured in
+    docs/ddm.md; a mesh base is piecewise linear, its creases make it 1), so one
+    measurement at ``start`` predicts R; the prediction is checked, doubled until it holds (at most
     :data:`AUTO_MAX_RESOLUTION`, which is returned if even that misses) and halved while
     the half still holds.
 
@@ -349,16 +354,18 @@ def choose_resolution(base, tolerance: float, w_max: float, start: int = 32) -> 
     if not (math.isfinite(tolerance) and tolerance > 0):
         raise ValueError(f"ddm: 'tolerance' must be a positive number, got {tolerance!r}")
     diagonal = base_sample_diagonal(base)
+    build = build or (lambda r: build_maps(base, r))
+    measure = error or map_error
     trials = {}
 
     def error(r: int) -> float:
         if r not in trials:
-            trials[r] = map_error(base, build_maps(base, r), w_max) / diagonal
+            trials[r] = measure(base, build(r), w_max) / diagonal
         return trials[r]
 
     r = start
     if error(r) > tolerance:
-        predicted = r * math.sqrt(error(r) / tolerance)
+        predicted = r * (error(r) / tolerance) ** (1 / order)
         r = min(AUTO_MAX_RESOLUTION, 2 ** math.ceil(math.log2(predicted)))
         while error(r) > tolerance and r < AUTO_MAX_RESOLUTION:
             r *= 2

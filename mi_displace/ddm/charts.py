@@ -229,3 +229,33 @@ class ChartMaps:
         idx, wu, wv = self.grid.bilinear_indices(mi.Float(u), mi.Float(v), chart)
         s = float(self.grid.r - 1)
         return bilinear(self.position, self.normal, idx, wu, wv, s, s, derivatives)
+
+
+def map_error(base, maps: ChartMaps, w_max: float, samples: int = 1 << 16, seed: int = 0) -> float:
+    """:func:`mi_displace.ddm.base_maps.map_error` for per-chart maps: the largest error of
+    T = P + N w against S + n w (object units, w in {0, w_max}) at ``samples`` seeded random
+    cell centres of the chart windows and ``samples`` seeded random (u, v), each looked up in the chart
+    that covers it; points whose four lookup texels are not all on that chart (clamped
+    lookups, bounded separately in docs/ddm.md) are skipped."""
+    g = maps.grid
+    h = 0.5 / (g.r - 1)
+    rng = np.random.default_rng(seed)
+    cells = rng.choice(g.texels, min(samples, g.texels), replace=False)   # cell centres
+    u = np.concatenate([g.u[cells] + h, rng.random(samples)]).astype(np.float32)
+    v = np.concatenate([g.v[cells] + h, rng.random(samples)]).astype(np.float32)
+    uu, vv = mi.Float(u), mi.Float(v)
+    hit, prim, _, _ = base.locate(uu, vv)
+    chart = mi.UInt32(base.face_chart[np.asarray(prim)].astype(np.uint32))
+    idx, _, _ = g.bilinear_indices(uu, vv, chart)
+    valid = mi.Bool(np.ascontiguousarray(maps.valid))
+    keep = hit
+    for k in idx:
+        keep &= dr.gather(mi.Bool, valid, k)
+    keep = np.asarray(keep)
+    uu, vv = mi.Float(u[keep]), mi.Float(v[keep])
+    chart = mi.UInt32(base.face_chart[np.asarray(prim)[keep]].astype(np.uint32))
+    s = base.sample_chart(uu, vv, chart)
+    p, n = maps.lookup(uu, vv, False, chart)
+    d0 = dr.norm(p - s.p)
+    d1 = dr.norm(p + n * w_max - (s.p + s.n * w_max))
+    return float(dr.max(dr.maximum(d0, d1))[0])

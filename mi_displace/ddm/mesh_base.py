@@ -96,6 +96,7 @@ class MeshBase(BaseSurface):
         pu, pv = _per_triangle_gradient(pos, uv, f)
         nu, nv = _per_triangle_gradient(nrm, uv, f)
         self._dp = (_vec(pu), _vec(pv))
+        self.gradients_np = (pu.astype(np.float64), pv.astype(np.float64))  # (F, 3) S_u, S_v
         self._dn = (_vec(nu), _vec(nv))
         # curvature bound: normal turn per unit length over every edge
         e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])

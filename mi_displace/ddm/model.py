@@ -31,6 +31,20 @@ def _sign(x: float) -> float:
     return -1.0 if x < 0 else 1.0
 
 
+class _SensorFit:
+    """Whether the scene being loaded will call ``fit_to_sensors`` on its ``ddm`` shapes
+    (:func:`mi_displace.render.scene.load` does): then ``map_resolution="auto"`` skips the
+    sensor-free tolerance search and builds a provisional map until the sensors are known.
+    Process-wide, not per thread: Mitsuba builds a scene's plugins on its worker threads."""
+
+    pending = False
+
+
+SENSOR_FIT = _SensorFit()
+#: provisional resolution of ``auto`` while a sensor fit is pending
+AUTO_PROVISIONAL = 16
+
+
 class FoldingWarning(UserWarning):
     """w exceeds the base's radius of curvature: the mapped volume folds over itself."""
 
@@ -78,7 +92,8 @@ class DDMConfig:
     height: float = 0.1                 # [object units per unit tile z]
     mode: str = "maps"
     map_resolution: int | str = 256     # or "auto": smallest R meeting 'tolerance'
-    tolerance: float = 1e-4             # auto: max mapped-point error / base diagonal
+    tolerance: float = 1e-4             # auto, no sensor: max mapped-point error / diagonal
+    dicing_rate: float = 1.0            # auto with sensors: pixels per texel [px]
     chart_border: str = "clamp"         # mesh bases: tiles across UV charts clamp | drop
     normals: str = "tangent"
     epsilon: float = 1e-3               # [tile units]
@@ -90,13 +105,15 @@ class DDMConfig:
         if self.mode not in mapping.MODES:
             raise ValueError(f"ddm: unknown 'mode' {self.mode!r}; expected exact, maps, "
                              "reference (= exact) or approximation (= maps)")
-        for key in ("height", "w_offset", "time", "epsilon"):
+        for key in ("height", "w_offset", "time", "epsilon", "dicing_rate"):
             if not math.isfinite(getattr(self, key)):
                 raise ValueError(f"ddm: '{key}' must be finite, got {getattr(self, key)!r}")
         if not 0 < self.epsilon < 0.5:
             raise ValueError(f"ddm: 'epsilon' must lie in (0, 0.5) tile units, got {self.epsilon!r}")
         if self.map_resolution != "auto":
             base_maps.check_resolution(self.map_resolution)
+        if not self.dicing_rate > 0:
+            raise ValueError(f"ddm: 'dicing_rate' must be positive (pixels), got {self.dicing_rate!r}")
         if not (math.isfinite(self.tolerance) and self.tolerance > 0):
             raise ValueError(f"ddm: 'tolerance' must be a positive number, got {self.tolerance!r}")
         if self.base not in BASE_PARAMS and self.base != "mesh":
@@ -139,13 +156,8 @@ class DDMModel:
         self._warn_folding()
         self.maps = None
         self.auto_trials = None
-        if cfg.map_resolution == "auto":
-            if not self._all_valid_base():
-                raise ValueError("ddm: map_resolution 'auto' needs an analytic or Bezier base: on a "
-                                 "mesh the bilinear lookup across UV-chart borders does not "
-                                 "converge with R; give an integer map_resolution")
-            cfg.map_resolution, self.auto_trials = base_maps.choose_resolution(
-                self.base, cfg.tolerance, self._w_max())
+        self.auto = cfg.map_resolution == "auto"
+        self.resolution_rule = "given"
         self.pruned = 0
         self.chart_stats = {}
         if not self._all_valid_base():
@@ -158,6 +170,12 @@ class DDMModel:
                 raise ValueError("ddm: no tile touches the base mesh's UV layout")
             self.reach = charts.tile_reach(self.tiles, layout.size)
         if cfg.mode == "maps":
+            if self.auto and SENSOR_FIT.pending:     # fit_to_sensors follows at once
+                cfg.map_resolution, self.resolution_rule = AUTO_PROVISIONAL, "auto: provisional"
+            elif self.auto:
+                cfg.map_resolution, self.auto_trials = self._resolution_by_tolerance()
+                self.resolution_rule = (f"auto: tolerance {cfg.tolerance:g} of the diagonal "
+                                        "(no sensor known)")
             self.maps = self.maps_at(cfg.map_resolution)
         if self._all_valid_base() and self.maps is not None:
             bounds = np.array([[*t.positions[:, :2].min(0), *t.positions[:, :2].max(0)]
@@ -179,6 +197,40 @@ class DDMModel:
         self.vertex_count = self.placement.vertex_total(self.buffers)
         self.face_count = dr.width(self.faces)
         self.build_s = time.perf_counter() - start
+
+    def _resolution_by_tolerance(self):
+        """``map_resolution="auto"`` without a sensor: the smallest power of two meeting
+        ``tolerance`` (:func:`~mi_displace.ddm.base_maps.choose_resolution`; on a mesh base
+        measured on per-chart maps at points whose lookups stay on one chart)."""
+        if self._all_valid_base():
+            return base_maps.choose_resolution(self.base, self.cfg.tolerance, self._w_max())
+        return base_maps.choose_resolution(self.base, self.cfg.tolerance, self._w_max(),
+                                           build=self.maps_at, error=charts.map_error, order=1.0)
+
+    def fit_to_sensors(self, sensors, to_world) -> bool:
+        """``map_resolution="auto"`` from the base's screen footprint: the geometry images
+        are a uniform tessellation of S (§3.1), so choose R such that no texel of the
+        visible base spans more than ``dicing_rate`` pixels in any of ``sensors`` (Cycles'
+        dicing rate, per texel; :func:`mi_displace.ddm.footprint.resolution`).  Rebuilds
+        the maps when R changes.
+
+        Returns:
+            True when the maps changed (the caller re-maps the vertices).
+        """
+        from mi_displace.ddm import footprint
+
+        if not self.auto or self.cfg.mode != "maps":
+            return False
+        r, info = footprint.resolution(self.base, sensors, to_world, self.cfg.dicing_rate)
+        self.resolution_rule = (f"auto: screen footprint, {self.cfg.dicing_rate:g} px per texel "
+                                f"over {len(sensors)} sensor(s)")
+        self.footprint = info
+        if r == self.maps.ru:
+            return False
+        self.cfg.map_resolution = r
+        self.maps = self.maps_at(r)
+        self.evaluator = mapping.MapsEvaluator(self.maps)
+        return True
 
     def maps_at(self, resolution: int):
         """The geometry images of this model's base at ``resolution``: one pair of maps on
@@ -300,7 +352,8 @@ class DDMModel:
              **self.chart_stats, "vertices": self.vertex_count, "faces": self.face_count,
              "build_s": self.build_s, **self.memory_report()}
         if self.maps is not None:
-            s.update(map_resolution=self.maps.ru, **self.maps.stats)
+            s.update(map_resolution=self.maps.ru, map_resolution_rule=self.resolution_rule,
+                     **self.maps.stats, **getattr(self, "footprint", {}))
         if self.auto_trials is not None:
             s["auto_trials"] = [[r, e] for r, e in self.auto_trials]
         return s

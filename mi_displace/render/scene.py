@@ -98,10 +98,19 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
         raise RuntimeError("no Mitsuba variant is set: call mi_displace.init() first")
     dr.sync_thread()
     start = time.perf_counter()
+    from mi_displace.ddm.model import SENSOR_FIT
+
+    SENSOR_FIT.pending = True      # ddm "auto" waits for the sensors (fitted below)
     try:
         scene = mi.load_file(str(path), **params)
     except RuntimeError as e:
         raise _translate_load_error(path, e) from None
+    finally:
+        SENSOR_FIT.pending = False
+    for shape in scene.shapes():   # shapes whose quality follows the sensors (ddm "auto")
+        fit = getattr(shape, "fit_to_scene", None)
+        if fit is not None:
+            fit(scene)
     dr.sync_thread()
     build_s = time.perf_counter() - start
     return scene, {"build_s": build_s, "spp": scene_spp(scene), "shapes": shape_stats(scene)}

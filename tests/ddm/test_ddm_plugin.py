@@ -110,9 +110,14 @@ def test_auto_map_resolution(variant):
     s = ddm(base="sphere", tile="stone", tiles_u=8, tiles_v=4, map_resolution="auto",
             tolerance=1e-3, height=0.1)
     assert s.build_stats["map_resolution"] == 64 and len(s.build_stats["auto_trials"]) >= 2
-    with pytest.raises(Exception, match="auto"):
-        ddm(base="mesh", filename=str(SCENES.parent / "data" / "spot" / "spot_triangulated.obj"),
-            map_resolution="auto")
+    # mesh bases (no sensor known to a plain load): the tolerance rule on per-chart maps
+    g = ddm(base="mesh", filename=str(SCENES / "parts" / "ddm_genus1" / "genus1.obj"),
+            tile="chain", tiles_u=16, tiles_v=16, height=0.05, map_resolution="auto",
+            tolerance=1e-3)
+    st = g.build_stats
+    assert st["map_resolution_rule"].startswith("auto: tolerance")
+    errors = dict(st["auto_trials"])
+    assert errors[st["map_resolution"]] <= 1e-3 < errors[32]
     with pytest.raises(Exception, match="map_resolution"):
         ddm(map_resolution="fine")
 

@@ -100,8 +100,8 @@ def test_folding_warning_on_a_mesh_says_where(spot):
 
 
 def test_exact_reference_does_not_move_with_map_resolution(variant):
-    """Pruning on a mesh base is decided on the mesh: the exact shape (tiles, vertices,
-    faces) is bit-identical whatever map_resolution the approximation would use."""
+    """Pruning on a mesh base is decided on the mesh: the exact shape (tiles, faces,
+    vertices) is the same whatever map_resolution the approximation would use."""
     kw = dict(type="ddm", base="mesh", filename=SPOT, tile="chain", tiles_u=24, tiles_v=24,
               height=0.03, mode="exact")
     shapes = [mi.load_dict({**kw, "map_resolution": r}) for r in (16, 64, 256)]
@@ -110,7 +110,8 @@ def test_exact_reference_does_not_move_with_map_resolution(variant):
     assert np.all(np.isfinite(ref))
     for s, p in zip(shapes[1:], params[1:]):
         assert s.build_stats["tiles_placed"] == shapes[0].build_stats["tiles_placed"]
-        assert np.array_equal(np.asarray(p["vertex_positions"]), ref)
+        # the same to float rounding: Embree may pick either triangle of a shared UV edge
+        assert np.abs(np.asarray(p["vertex_positions"]) - ref).max() < 1e-6
         assert np.array_equal(np.asarray(p["faces"]), np.asarray(params[0]["faces"]))
     # and the maps mode places the same tiles at every resolution
     counts = {mi.load_dict({**kw, "mode": "maps", "map_resolution": r}).build_stats["tiles_placed"]
