@@ -27,6 +27,7 @@ import numpy as np
 from mi_displace.core.tessellate import gather
 
 MAX_MAP_RESOLUTION = 8192
+MIN_MAP_RESOLUTION = 4
 
 
 def texel_coordinates(ru: int, rv: int, periodic_u: bool, periodic_v: bool):
@@ -35,8 +36,6 @@ def texel_coordinates(ru: int, rv: int, periodic_u: bool, periodic_v: bool):
     iu, iv = mi.Float(i % ru), mi.Float(i // ru)
 
     def coord(k, r, periodic):
-        if r == 1:
-            return dr.zeros(mi.Float, ru * rv) + (0.0 if periodic else 0.5)
         return k / (r if periodic else r - 1)
 
     return coord(iu, ru, periodic_u), coord(iv, rv, periodic_v)
@@ -154,9 +153,6 @@ class GeometryImage:
 
     def _axis(self, x, r: int, periodic: bool):
         """Texel indices i0, i1, weight of i1 and d(s)/dx along one axis (§3.2 lookup)."""
-        if r == 1:
-            z = dr.zeros(mi.UInt32, dr.width(x))
-            return z, z, dr.zeros(mi.Float, dr.width(x)), 0.0
         if periodic:
             s = x * r
             f0 = dr.floor(s)
@@ -192,8 +188,6 @@ class GeometryImage:
         mask = mi.Bool(np.ascontiguousarray(self.valid.ravel()))
 
         def nearest(x, r, periodic):
-            if r == 1:
-                return dr.zeros(mi.UInt32, dr.width(x))
             if periodic:
                 k = mi.Int32(dr.round(x * r))
                 return mi.UInt32(k - r * mi.Int32(dr.floor(mi.Float(k) / r)))
@@ -207,8 +201,6 @@ class GeometryImage:
         uu, vv = np.asarray(u, np.float64), np.asarray(v, np.float64)
 
         def nearest(x, r, periodic):
-            if r == 1:
-                return np.zeros(x.shape, np.int64)
             if periodic:
                 return np.round(x * r).astype(np.int64) % r
             return np.clip(np.round(np.clip(x, 0, 1) * (r - 1)), 0, r - 1).astype(np.int64)
@@ -217,9 +209,13 @@ class GeometryImage:
 
 
 def check_resolution(value, name: str = "map_resolution") -> int:
-    """A map resolution in 1..MAX_MAP_RESOLUTION, else ValueError naming the parameter."""
-    if int(value) != value or not 1 <= value <= MAX_MAP_RESOLUTION:
-        raise ValueError(f"ddm: '{name}' must be an integer in 1..{MAX_MAP_RESOLUTION}, got {value!r}")
+    """A map resolution in MIN_MAP_RESOLUTION..MAX_MAP_RESOLUTION, else ValueError naming
+    the parameter: fewer than 4 texels around a periodic axis collapse the base (1: every
+    vertex on one point, 2: on a segment, 3: a flat prism), and 2 or 3 along an open
+    axis of a curved base leave nothing of its shape."""
+    if int(value) != value or not MIN_MAP_RESOLUTION <= value <= MAX_MAP_RESOLUTION:
+        raise ValueError(f"ddm: '{name}' must be an integer in {MIN_MAP_RESOLUTION}.."
+                         f"{MAX_MAP_RESOLUTION} (fewer texels collapse the base), got {value!r}")
     return int(value)
 
 

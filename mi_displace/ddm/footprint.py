@@ -41,7 +41,8 @@ def base_samples(base, n: int = 65):
     if isinstance(base, MeshBase):
         p = base.positions_np[base.faces_np].mean(1)
         t = base.uvs_np[base.faces_np]
-        area = 0.5 * np.abs(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
+        e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+        area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
         return p, *base.gradients_np, area
     u, v = texel_coordinates(n, n, False, False)
     s = base.sample(u, v)

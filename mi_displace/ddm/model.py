@@ -46,7 +46,7 @@ AUTO_PROVISIONAL = 16
 
 
 class FoldingWarning(UserWarning):
-    """w exceeds the base's radius of curvature: the mapped volume folds over itself."""
+    """T(u, v, w) folds for some w the tiles reach: the mapped volume turns inside out."""
 
 
 def make_base(name: str, filename: str | None = None, **params):
@@ -262,19 +262,42 @@ class DDMModel:
         h = self.cfg.height * (1 + abs(self.cfg.animation.w_amplitude))
         return max(abs(h * z.max() + self.cfg.w_offset), abs(h * z.min() + self.cfg.w_offset))
 
+    def _w_range(self) -> tuple[float, float]:
+        """Smallest and largest w any tile vertex reaches (object units), animation
+        included (the w scale swings between height (1 - |a|) and height (1 + |a|))."""
+        z = np.concatenate([t.positions[:, 2] for t in self.tiles])
+        a = abs(self.cfg.animation.w_amplitude)
+        ws = [h * zz + self.cfg.w_offset for h in (self.cfg.height * (1 - a), self.cfg.height * (1 + a))
+              for zz in (z.min(), z.max())]
+        return min(ws), max(ws)
+
     def _warn_folding(self) -> None:
-        """Warn when w exceeds the radius of curvature 1/kappa (the map T folds)."""
-        w_max = self._w_max()
-        k_lo, k_hi = self.base.curvature_bounds()
-        kappa = max(abs(k_lo), abs(k_hi))
-        if kappa > 0 and w_max * kappa >= 1:
-            where = ""
-            edge_kappa = getattr(self.base, "edge_kappa", None)
-            if edge_kappa is not None:
-                where = f" (on {int(np.sum(edge_kappa * w_max >= 1)):,} of {len(edge_kappa):,} mesh edges)"
-            warnings.warn(f"ddm: w up to {w_max:.4g} exceeds the base's smallest radius of "
-                          f"curvature {1 / kappa:.4g}{where}: T(u, v, w) folds there (tiles "
-                          "turn inside out; output stays finite)", FoldingWarning, stacklevel=3)
+        """Warn where T(u, v, w) = S + n w really folds: where det J_T = (T_u x T_v) . n
+        changes sign between w = 0 and some w the tiles reach.  det J_T(w) / det J_T(0) =
+        (1 + w k1)(1 + w k2) (k1, k2 principal curvatures, positive where n points away
+        from the centre of curvature), a quadratic in w checked at both ends of the w range
+        and at its extremum — so outward thorns on a small sphere (1 + w / r > 0) or w below
+        R - r on a torus do not warn, inward w beyond r does."""
+        lo, hi = self._w_range()
+        s = self.base.fold_samples() if hasattr(self.base, "fold_samples") else self.base.sample(
+            *base_maps.texel_coordinates(129, 129, False, False))
+        a = dr.dot(dr.cross(s.dp_du, s.dp_dv), s.n)
+        b = dr.dot(dr.cross(s.dp_du, s.dn_dv) + dr.cross(s.dn_du, s.dp_dv), s.n)
+        c = dr.dot(dr.cross(s.dn_du, s.dn_dv), s.n)
+        a, b, c = (np.broadcast_to(np.asarray(x, np.float64), (dr.width(s.p),)) for x in (a, b, c))
+        ok = np.abs(a) > 1e-12 * max(np.abs(a).max(), 1e-30)     # poles / degenerate faces
+        a, b, c = a[ok], b[ok], c[ok]
+        ratio = [1 + (b / a) * w + (c / a) * w * w for w in (lo, hi)]
+        w_star = np.where(c != 0, -b / (2 * np.where(c != 0, c, 1)), lo)
+        inside = (w_star > lo) & (w_star < hi)
+        ratio.append(np.where(inside, 1 + (b / a) * w_star + (c / a) * w_star ** 2, 1.0))
+        folds = np.minimum.reduce(ratio) <= 0
+        if folds.any():
+            what = "mesh faces" if hasattr(self.base, "fold_samples") else "sampled points of the base"
+            warnings.warn(f"ddm: w in [{lo:.4g}, {hi:.4g}] folds T(u, v, w) = S + n w on "
+                          f"{int(folds.sum()):,} of {len(folds):,} {what} (det of the Jacobian "
+                          "changes sign: tiles turn inside out there; output stays finite)",
+                          FoldingWarning, stacklevel=3)
 
     def tile_buffers_at(self, t: float):
         """The tile arrays at time t: the metamorphosed tile (eq. 3) or the stored ones."""

@@ -8,6 +8,7 @@ from scipy import ndimage
 from mi_displace.core.surfaces import BaseSurface, SurfaceSample, make_base
 from mi_displace.ddm import base_maps
 from mi_displace.ddm.layout import make_layout
+from mi_displace.ddm.model import DDMConfig, DDMModel
 
 
 def _np(v):
@@ -107,13 +108,18 @@ def test_degenerate_normal_texels_are_invalid_and_filled(variant):
     assert np.all(np.isfinite(_np(n))) and np.allclose(_np(n), [0, 0, 1])
 
 
-def test_one_texel_and_bad_resolutions(variant):
-    maps = base_maps.build_maps(make_base("sphere"), 1)
-    p, n = maps.lookup(mi.Float([0.0, 0.7]), mi.Float([0.1, 0.9]))
-    assert np.all(np.isfinite(_np(p))) and np.allclose(_np(p)[0], _np(p)[1])
-    for bad in (0, -3, 2.5, base_maps.MAX_MAP_RESOLUTION + 1):
+def test_too_small_and_bad_resolutions(variant):
+    # 1 texel put every vertex of a sphere on one point, 2 on a segment: refused
+    for bad in (0, 1, 2, 3, -3, 2.5, base_maps.MAX_MAP_RESOLUTION + 1):
         with pytest.raises(ValueError, match="map_resolution"):
             base_maps.build_maps(make_base("sphere"), bad)
+    with pytest.raises(ValueError, match="map_resolution.*collapse"):
+        DDMModel(DDMConfig(base="sphere", tiles_u=4, tiles_v=2, map_resolution=1))
+    # the smallest accepted one still encloses volume: 4 texels around the sphere
+    maps = base_maps.build_maps(make_base("sphere"), base_maps.MIN_MAP_RESOLUTION)
+    p, _ = maps.lookup(*base_maps.texel_coordinates(64, 64, True, False))
+    p = _np(p)
+    assert np.all(np.isfinite(p)) and np.ptp(p, 0).min() > 1.0
 
 
 def test_pruning_counts_tiles_without_valid_texels(variant):

@@ -7,6 +7,7 @@ import pytest
 from mi_displace.ddm import normals as nrm
 from mi_displace.ddm.animation import Animation
 from mi_displace.ddm.model import DDMConfig, DDMModel, FoldingWarning
+from mi_displace.ddm.tiles import get_tile
 
 
 def _np(v):
@@ -103,10 +104,34 @@ def test_tiles_crossing_the_seam_wrap_without_cracks(variant):
         assert np.abs(_np(p2) - P).max() < 2e-5
 
 
-def test_folding_is_flagged_and_stays_finite(variant):
-    with pytest.warns(FoldingWarning, match="radius of curvature"):
-        m = DDMModel(DDMConfig(base="sphere", tile="thorn", tiles_u=8, tiles_v=4, height=-3.0,
-                               mode="maps", map_resolution=16))
+@pytest.mark.parametrize("base, params, height", [
+    ("sphere", {"radius": 0.3}, 0.45),     # outward thorns on a small sphere: (r + w) n
+    ("sphere", {"radius": 0.3}, -0.45),    # inward beyond the radius: folds
+    ("torus", {"major_radius": 1.0, "minor_radius": 0.3}, 0.45),   # w < R - r
+    ("torus", {"major_radius": 1.0, "minor_radius": 0.3}, 0.9),    # w > R - r: inner side
+    ("torus", {"major_radius": 1.0, "minor_radius": 0.3}, -0.35),  # inward beyond r
+    ("plane", {}, 5.0),
+])
+def test_folding_is_flagged_only_where_the_map_folds(variant, base, params, height):
+    """Truth from the principal curvatures (n outward): 1 + w k <= 0 for some reached w —
+    sphere k = 1/r; torus k in {1/r, cos(psi)/(R + r cos(psi))}, smallest -1/(R - r)."""
+    z = get_tile("thorn").positions[:, 2]
+    w = np.array([height * z.min(), height * z.max()])
+    if base == "sphere":
+        kappas = [1 / params["radius"]]
+    elif base == "torus":
+        kappas = [1 / params["minor_radius"], -1 / (params["major_radius"] - params["minor_radius"])]
+    else:
+        kappas = [0.0]
+    expected = any((1 + w * k <= 0).any() for k in kappas)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        m = DDMModel(DDMConfig(base=base, base_params=params, tile="thorn", tiles_u=8, tiles_v=4,
+                               height=height, mode="maps", map_resolution=16))
+    flagged = [c for c in caught if issubclass(c.category, FoldingWarning)]
+    assert bool(flagged) == expected, (base, height, w, [str(c.message) for c in flagged])
+    if flagged:
+        assert "det of the Jacobian" in str(flagged[0].message)
     p, n, _ = m.map()
     assert np.all(np.isfinite(_np(p))) and np.all(np.isfinite(_np(n)))
     assert np.allclose(np.linalg.norm(_np(n), axis=1), 1, atol=1e-4)

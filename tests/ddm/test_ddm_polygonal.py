@@ -94,7 +94,7 @@ def test_mesh_base_without_uvs_or_file_is_refused(variant, tmp_path):
 
 
 def test_folding_warning_on_a_mesh_says_where(spot):
-    with pytest.warns(Warning, match=r"on [\d,]+ of 17,568 mesh edges"):
+    with pytest.warns(Warning, match=r"on [\d,]+ of 5,856 mesh faces"):
         DDMModel(DDMConfig(base="mesh", filename=SPOT, tile="stone", tiles_u=4, tiles_v=4,
                            height=0.2, mode="exact"), base=spot)
 
