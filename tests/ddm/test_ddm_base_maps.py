@@ -135,16 +135,47 @@ def test_pruning_counts_tiles_without_valid_texels(variant):
     assert pruned_small == 4 * 4
 
 
+R_MAJOR, R_MINOR, W_MAX = 1.0, 0.4, 0.1
+
+
+def torus_map_error(maps) -> float:
+    """Largest |T_maps - T| / bbox diagonal over w in {0, W_MAX}, with T from the torus's
+    closed form in NumPy (float64): independent of base.sample and of base_maps.map_error.
+    Points: every cell centre (where bilinear interpolation errs most) and 20,000 random."""
+    rng = np.random.default_rng(11)
+    i, j = np.meshgrid(np.arange(maps.ru), np.arange(maps.rv))
+    u = np.concatenate([((i + 0.5) / maps.ru).ravel(), rng.random(20000)])
+    v = np.concatenate([((j + 0.5) / maps.rv).ravel(), rng.random(20000)])
+    phi, psi = 2 * np.pi * u, 2 * np.pi * v
+    n = np.stack([np.cos(psi) * np.cos(phi), np.cos(psi) * np.sin(phi), np.sin(psi)], 1)
+    s = np.stack([(R_MAJOR + R_MINOR * np.cos(psi)) * np.cos(phi),
+                  (R_MAJOR + R_MINOR * np.cos(psi)) * np.sin(phi), R_MINOR * np.sin(psi)], 1)
+    p, nm = maps.lookup(mi.Float(u.astype(np.float32)), mi.Float(v.astype(np.float32)))
+    p, nm = _np(p), _np(nm)
+    err = max(np.linalg.norm(p + nm * w - (s + n * w), axis=1).max() for w in (0.0, W_MAX))
+    diag = np.sqrt(2 * (2 * (R_MAJOR + R_MINOR)) ** 2 + (2 * R_MINOR) ** 2)
+    return err / diag
+
+
 def test_auto_resolution_meets_the_tolerance_with_the_smallest_power_of_two(variant):
-    base = make_base("torus", major_radius=1.0, minor_radius=0.4)
-    r, trials = base_maps.choose_resolution(base, 2e-4, 0.1)
-    errors = dict(trials)
-    assert errors[r] <= 2e-4 and errors[r // 2] > 2e-4
-    # independent check: the error of a freshly built map at r, against the exact base
-    diag = base_maps.base_sample_diagonal(base)
-    assert base_maps.map_error(base, base_maps.build_maps(base, r), 0.1, seed=9) / diag <= 2e-4
+    base = make_base("torus", major_radius=R_MAJOR, minor_radius=R_MINOR)
+    r, trials = base_maps.choose_resolution(base, 2e-4, W_MAX)
+    assert r & (r - 1) == 0
+    # independent check (closed form, not map_error): r meets it, r / 2 does not
+    assert torus_map_error(base_maps.build_maps(base, r)) <= 2e-4 * 1.02
+    assert torus_map_error(base_maps.build_maps(base, r // 2)) > 2e-4
     with pytest.raises(ValueError, match="tolerance"):
-        base_maps.choose_resolution(base, 0.0, 0.1)
+        base_maps.choose_resolution(base, 0.0, W_MAX)
+
+
+def test_auto_check_catches_an_underestimating_map_error(variant, monkeypatch):
+    """Fault injection (issue 19 item 6): a map_error that reports a quarter of the true
+    error makes choose_resolution pick too small an R, and the closed-form check says so."""
+    base = make_base("torus", major_radius=R_MAJOR, minor_radius=R_MINOR)
+    honest = base_maps.map_error
+    monkeypatch.setattr(base_maps, "map_error", lambda *a, **k: 0.25 * honest(*a, **k))
+    r, _ = base_maps.choose_resolution(base, 2e-4, W_MAX)
+    assert torus_map_error(base_maps.build_maps(base, r)) > 2e-4
 
 
 def test_clamped_count_wraps_on_periodic_axes(variant):
