@@ -97,7 +97,7 @@ class DDM(mi.Mesh):
     def _remap(self) -> None:
         """Map the tiles at the current time / height and write the vertex buffers."""
         start = time.perf_counter()
-        positions, normals, uv = self.model.map(self.time[0], self.height[0])
+        positions, normals, uv = self.model.map(self.time, self.height)
         to_world = mi.Transform4f(self.to_world)
         params = mi.traverse(self)
         if self._faces_version != self.model.faces_version:  # the w scale changed sign
@@ -132,11 +132,12 @@ class DDM(mi.Mesh):
 
     def traverse(self, cb):
         super().traverse(cb)
-        cb.put("time", self.time, mi.ParamFlags.NonDifferentiable)
-        cb.put("height", self.height, mi.ParamFlags.NonDifferentiable)
+        cb.put("time", self.time, mi.ParamFlags.Differentiable)
+        cb.put("height", self.height, mi.ParamFlags.Differentiable)
+        cb.put("tile_positions", self.model.buffers.positions, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys=[]):
-        if "time" in keys or "height" in keys:
+        if "time" in keys or "height" in keys or "tile_positions" in keys:
             self._remap()    # DDMModel.map refuses non-finite values
         else:
             super().parameters_changed(keys)

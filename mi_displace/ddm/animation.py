@@ -50,22 +50,31 @@ class Animation:
             if not math.isfinite(float(value)):
                 raise ValueError(f"ddm: '{key}' must be finite, got {value!r}")
 
-    def affine(self, t: float):
+    def affine(self, t):
         """Texture-space transform at time t: ((a00, a01), (a10, a11)), (b0, b1) acting on
-        tile coordinates as x' = A x + b."""
-        c, s = math.cos(self.rotation_rate * t), math.sin(self.rotation_rate * t)
+        tile coordinates as x' = A x + b.  ``t``: a float, or a Dr.Jit Float (then the
+        entries are Dr.Jit expressions of it and differentiable)."""
+        c, s = _cos(self.rotation_rate * t), _sin(self.rotation_rate * t)
         a = ((c, -s), (s, c))
         b = (0.5 - (c * 0.5 - s * 0.5) + self.velocity_u * t,
              0.5 - (s * 0.5 + c * 0.5) + self.velocity_v * t)
         return a, b
 
-    def w_factor(self, t: float) -> float:
-        """Multiplier of the tile height at time t."""
-        return 1.0 + self.w_amplitude * math.sin(2 * math.pi * self.w_frequency * t)
+    def w_factor(self, t):
+        """Multiplier of the tile height at time t (float or Dr.Jit Float)."""
+        return 1.0 + self.w_amplitude * _sin(2 * math.pi * self.w_frequency * t)
 
     def alpha(self, t: float) -> float:
         """Metamorphosis weight alpha(t) (eq. 3); may leave [0, 1] (extrapolation)."""
         return self.alpha0 + self.alpha_rate * t
+
+
+def _sin(x):
+    return dr.sin(x) if dr.is_array_v(x) else math.sin(x)
+
+
+def _cos(x):
+    return dr.cos(x) if dr.is_array_v(x) else math.cos(x)
 
 
 def check_compatible(a: Tile, b: Tile) -> None:

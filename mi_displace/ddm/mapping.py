@@ -235,10 +235,14 @@ def map_tiles(evaluator, placement: Placement, buffers: TileBuffers, affine, hei
     vn = gather(mi.Vector3f, tn, k)
     offset = gather(mi.Point2f, placement.offsets, inst)
     sign = 1.0 if orientation is None else dr.gather(mi.Float, orientation, inst)
-    # per-frame scalars as opaque variables: one compiled kernel serves every frame
-    (a00, a01), (a10, a11) = (tuple(dr.opaque(mi.Float, x) for x in row) for row in affine[0])
-    b0, b1 = (dr.opaque(mi.Float, x) for x in affine[1])
-    height, w_offset = dr.opaque(mi.Float, height), dr.opaque(mi.Float, w_offset)
+    # per-frame scalars as opaque variables: one compiled kernel serves every frame (a
+    # Dr.Jit Float with a gradient is kept as it is: differentiable in time / height)
+    def scalar(x):
+        return x if dr.is_array_v(x) else dr.opaque(mi.Float, x)
+
+    (a00, a01), (a10, a11) = (tuple(scalar(x) for x in row) for row in affine[0])
+    b0, b1 = (scalar(x) for x in affine[1])
+    height, w_offset = scalar(height), scalar(w_offset)
     su, sv = placement.size
 
     def place(p):

@@ -92,6 +92,7 @@ class MeshBase(BaseSurface):
         params.update()
         self._scene = mi.load_dict({"type": "scene", "layout": layout})
         self._faces = mi.Vector3u(*(mi.UInt32(f[:, k].astype(np.uint32)) for k in range(3)))
+        self._uv = mi.Point2f(mi.Float(uv[:, 0].astype(np.float32)), mi.Float(uv[:, 1].astype(np.float32)))
         self._p, self._n = _vec(pos), _vec(nrm)
         pu, pv = _per_triangle_gradient(pos, uv, f)
         nu, nv = _per_triangle_gradient(nrm, uv, f)
@@ -143,7 +144,7 @@ class MeshBase(BaseSurface):
         lo = dr.zeros(mi.UInt32, n) if chart is None else dr.gather(mi.UInt32, self._edge_first, chart)
         hi = (dr.zeros(mi.UInt32, n) + self.boundary_edges if chart is None
               else dr.gather(mi.UInt32, self._edge_first, chart + 1))
-        p = mi.Point2f(u, v)
+        p = mi.Point2f(dr.detach(u), dr.detach(v))      # the search itself: no gradient
         best_d = dr.full(mi.Float, dr.inf, n)
         best_e, best_t = dr.zeros(mi.UInt32, n), dr.zeros(mi.Float, n)
 
@@ -158,6 +159,11 @@ class MeshBase(BaseSurface):
 
         _, _, best_e, best_t = dr.while_loop((lo, best_d, best_e, best_t),
                                              lambda i, *_: i < hi, body)
+        if dr.grad_enabled(u) or dr.grad_enabled(v):   # the edge's parameter, differentiable
+            a, b = (dr.gather(mi.Point2f, e, best_e) for e in self._edge_uv)
+            ab = b - a
+            best_t = dr.clip(dr.dot(mi.Point2f(u, v) - a, ab) / dr.maximum(dr.squared_norm(ab), 1e-30),
+                             0.0, 1.0)
         prim = dr.gather(mi.UInt32, self._edge_face, best_e)
         c0, c1 = (dr.gather(mi.UInt32, c, best_e) for c in self._edge_corners)
 
@@ -174,12 +180,24 @@ class MeshBase(BaseSurface):
         any chart): points outside it are clamped to the chart's nearest boundary point
         (:meth:`clamp`), never to another chart."""
         u, v = mi.Float(u), mi.Float(v)
-        valid, prim, b1, b2 = self.locate(u, v, chart)
+        differentiable = dr.grad_enabled(u) or dr.grad_enabled(v)
+        valid, prim, b1, b2 = self.locate(dr.detach(u), dr.detach(v), chart)
+        if differentiable:       # the ray's barycentrics carry no gradient: redo them in uv
+            b1, b2 = self._barycentrics(prim, u, v)
         if not dr.all(valid):
             prim2, c1, c2 = self.clamp(u, v, chart)
             prim = dr.select(valid, prim, prim2)
             b1, b2 = dr.select(valid, b1, c1), dr.select(valid, b2, c2)
         return self._sample_at(prim, b1, b2)
+
+    def _barycentrics(self, prim, u, v):
+        """Barycentrics (b1, b2) of (u, v) in triangle ``prim``'s UV image (differentiable)."""
+        a, b, c = (gather(mi.Point2f, self._uv, dr.gather(mi.UInt32, self._faces[k], prim))
+                   for k in range(3))
+        e1, e2, d = b - a, c - a, mi.Point2f(u, v) - a
+        det = e1.x * e2.y - e1.y * e2.x
+        inv = dr.select(dr.abs(det) > 1e-20, 1 / det, 0.0)
+        return (d.x * e2.y - d.y * e2.x) * inv, (e1.x * d.y - e1.y * d.x) * inv
 
     def fold_samples(self) -> SurfaceSample:
         """S, n and derivatives at every face centroid (the folding check of the model)."""

@@ -31,6 +31,17 @@ def _sign(x: float) -> float:
     return -1.0 if x < 0 else 1.0
 
 
+def _value(x) -> float:
+    """The value of a Python number or of a one-element Dr.Jit Float (detached)."""
+    return float(dr.detach(x)[0]) if dr.is_array_v(x) else float(x)
+
+
+def _scalar(x):
+    """A Dr.Jit Float that carries a gradient stays one (the mapping is differentiable in
+    it); anything else becomes a Python float."""
+    return x if dr.is_array_v(x) and dr.grad_enabled(x) else _value(x)
+
+
 class _SensorFit:
     """Whether the scene being loaded will call ``fit_to_sensors`` on its ``ddm`` shapes
     (:func:`mi_displace.render.scene.load` does): then ``map_resolution="auto"`` skips the
@@ -317,14 +328,15 @@ class DDMModel:
             ``(positions, normals, uv)`` Dr.Jit arrays (object space).
         """
         cfg = self.cfg
-        t = cfg.time if t is None else float(t)
-        height = cfg.height if height is None else float(height)
+        t = cfg.time if t is None else t
+        height = cfg.height if height is None else height
         for name, value in (("time", t), ("height", height)):
-            if not math.isfinite(value):
-                raise ValueError(f"ddm: '{name}' must be finite, got {value}")
+            if not math.isfinite(_value(value)):
+                raise ValueError(f"ddm: '{name}' must be finite, got {_value(value)}")
+        t, height = _scalar(t), _scalar(height)
         a = cfg.animation
         scale = height * a.w_factor(t)
-        self._wind_faces(_sign(scale))
+        self._wind_faces(_sign(_value(scale)))
         return mapping.map_tiles(evaluator or self.evaluator, self.placement, self.buffers,
                                  self._periodic_affine(a.affine(t)), scale, cfg.w_offset,
                                  method or cfg.normals, cfg.epsilon, self.tile_buffers_at(t),
@@ -334,10 +346,11 @@ class DDMModel:
         """The translation reduced by whole periods of a periodic base (in double precision,
         before it reaches float32 texture coordinates: long animations stay exact)."""
         (a, (b0, b1)), (su, sv) = affine, self.placement.size
+        # subtract whole periods (a constant: a differentiable b keeps its derivative)
         if getattr(self.base, "periodic_u", False):
-            b0 = math.fmod(b0 * su, 1.0) / su
+            b0 = b0 - (_value(b0) * su - math.fmod(_value(b0) * su, 1.0)) / su
         if getattr(self.base, "periodic_v", False):
-            b1 = math.fmod(b1 * sv, 1.0) / sv
+            b1 = b1 - (_value(b1) * sv - math.fmod(_value(b1) * sv, 1.0)) / sv
         return a, (b0, b1)
 
     def clamped_mask(self, uv) -> np.ndarray:
