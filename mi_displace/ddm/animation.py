@@ -95,10 +95,11 @@ def tangent_frame(n: mi.Vector3f):
     return t1, dr.cross(n, t1)
 
 
-def metamorphose(p1, n1, p2, n2, alpha: float):
+def metamorphose(p1, n1, p2, n2, alpha):
     """Eq. 3 on Dr.Jit vertex arrays: blended positions and unit normals.  Normals that
     cancel (N1 = -N2 at alpha = 1/2) fall back to N1."""
-    alpha = dr.opaque(mi.Float, alpha)   # one kernel for every frame
+    if not dr.is_array_v(alpha):         # a Dr.Jit alpha (differentiable time) stays
+        alpha = dr.opaque(mi.Float, alpha)   # one kernel for every frame
     p = p1 * (1 - alpha) + p2 * alpha
     nh = n1 * (1 - alpha) + n2 * alpha
     length = dr.norm(nh)

@@ -67,3 +67,25 @@ def test_height_time_and_tile_vertices_have_finite_difference_gradients(variant,
         value_at(key, type(x0)(x0))
         assert np.isfinite(ad) and ad != 0.0, (key, ad)
         assert abs(ad - fd) <= 0.03 * abs(fd) + 1e-3, (key, ad, fd)
+
+
+def test_metamorphosis_is_differentiable_in_time(variant):
+    scene = mi.load_dict({"type": "scene", "s": {
+        "type": "ddm", "base": "sphere", "tile": "thorn", "tile_target": "flower", "tiles_u": 4,
+        "tiles_v": 2, "alpha_rate": 1.0, "mode": "maps", "map_resolution": 32}})
+    params = mi.traverse(scene)
+    weights = mi.Float(np.random.default_rng(0).standard_normal(
+        dr.width(params["s.vertex_positions"])).astype(np.float32))
+
+    def value(t):
+        params["s.time"] = mi.Float(t)
+        params.update()
+        return float(_loss(params, weights)[0])
+
+    x = mi.Float(0.4)
+    dr.enable_grad(x)
+    params["s.time"] = x
+    params.update()
+    dr.backward(_loss(params, weights))
+    ad, fd = float(dr.grad(params["s.time"])[0]), (value(0.41) - value(0.39)) / 0.02
+    assert ad != 0.0 and abs(ad - fd) <= 0.03 * abs(fd)
