@@ -17,9 +17,11 @@ T(u, v, w) = S(u, v) + n(u, v) w (DDM, eq. 1) or its geometry-image form (HDDM, 
         <bsdf type="diffuse"/>
     </shape>
 
-Every parameter is described in ``docs/ddm.md``.  ``time`` and ``height`` are editable
-through ``mi.traverse``: changing them re-maps the vertices (positions, normals) in place,
-keeping faces, geometry images and tiles.
+Every parameter is described in ``docs/ddm.md`` (mesh bases also take ``chart_border``
+clamp|drop; ``map_resolution="auto"`` takes ``dicing_rate`` / ``tolerance``).  ``time``,
+``height`` and ``tile_positions`` are editable and differentiable through ``mi.traverse``:
+changing them re-maps the vertices (positions, normals) in place, keeping faces, geometry
+images and tiles.
 """
 from __future__ import annotations
 
