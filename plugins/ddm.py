@@ -90,6 +90,10 @@ class DDM(mi.Mesh):
         self._faces_version = None
         self._remap()
         stats = m.stats()
+        if stats.get("tiles_straddling"):   # mesh bases: tiles across UV-chart borders
+            mi.Log(mi.LogLevel.Info,
+                   f"ddm {self.id()!r}: {stats['tiles_straddling']} tiles straddle a UV-chart "
+                   f"border ({stats['tiles_dropped']} dropped, chart_border={m.cfg.chart_border})")
         mi.Log(mi.LogLevel.Info,
                f"ddm {self.id()!r}: {stats['tiles_placed']} tiles ({stats['tiles_pruned']} pruned), "
                f"{stats['vertices']:,} vertices; HDDM stores {stats['hddm_bytes']:,} bytes "
