@@ -174,3 +174,43 @@ def render(scene, spp: int | None = None, seed: int = 0, sensor: int = 0,
     if bar is not None:
         bar.close()
     return np.ascontiguousarray(image, dtype=np.float32), seconds
+
+
+def apply_edits(scene, edits: dict) -> None:
+    """Set ``mi.traverse`` parameters of a loaded scene and update it.
+
+    Args:
+        scene: a loaded ``mi.Scene``.
+        edits: ``{"shape_id.param": value}``; values (numbers or their text) are converted to
+            the parameter's current type (a scalar Dr.Jit array, ``int``, ``float`` or ``bool``).
+
+    Raises:
+        ValueError: a key the scene does not have (closest keys named), or a value that cannot
+            be converted.
+    """
+    import difflib
+
+    params = mi.traverse(scene)
+    for key, value in edits.items():
+        if key not in params:
+            close = difflib.get_close_matches(key, list(params.keys()), n=3)
+            hint = f"; did you mean {', '.join(close)}?" if close else ""
+            raise ValueError(f"scene parameter {key!r} does not exist (mi.traverse){hint}")
+        current = params[key]
+        try:
+            number = float(value)
+            if isinstance(current, bool):
+                new = bool(number)
+            elif isinstance(current, int):
+                if number != int(number):
+                    raise ValueError
+                new = int(number)
+            elif isinstance(current, float):
+                new = number
+            else:
+                new = type(current)(number)
+        except (TypeError, ValueError):
+            raise ValueError(f"scene parameter {key!r}: cannot set {value!r} "
+                             f"(current value {current!r})") from None
+        params[key] = new
+    params.update()
