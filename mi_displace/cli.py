@@ -23,7 +23,6 @@ import importlib
 import pkgutil
 import re
 import sys
-import traceback
 from pathlib import Path
 
 QUICK_MAX_SPP = 64
@@ -119,6 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"scene folder (default {default_scenes_dir()})")
     p.add_argument("--max-spp", type=_positive_int, default=None,
                    help=f"most reference spp (default {DEFAULT_MAX_SPP}, {QUICK_MAX_SPP} with --quick)")
+    p.add_argument("--cluster", default=None, metavar="ADDRESS",
+                   help="compare the scenes as jobs on a Dask cluster (tcp://HOST:PORT, or local:N)")
 
     p = sub.add_parser("bench", help="run a benchmark module mi_displace.bench.NAME")
     p.add_argument("name", help="benchmark name")
@@ -195,21 +196,31 @@ def showcase_scenes(scenes_dir: Path) -> list[Path]:
 
 
 def _cmd_showcase(args) -> int:
-    from mi_displace.evaluate.compare import compare
+    from mi_displace.evaluate.compare import compare_job, write_job_files
+    from mi_displace.evaluate.jobs import check_cluster, run_jobs
 
+    check_cluster(args.cluster)
     scenes_dir = args.scenes or default_scenes_dir()
     max_spp = args.max_spp or (QUICK_MAX_SPP if args.quick else DEFAULT_MAX_SPP)
-    rows, failed = [], 0
-    for path in showcase_scenes(scenes_dir):
-        name = path.relative_to(scenes_dir).with_suffix("").as_posix()
-        print(f"[showcase] {name} ...", file=sys.stderr, flush=True)
-        try:
-            rows.append({**compare(path, args.out / name, max_spp=max_spp, progress=True), "scene": name})
-        except Exception as e:  # one broken scene must not hide the others' results
-            failed += 1
-            if not isinstance(e, (ValueError, FileNotFoundError)):
-                traceback.print_exc()
-            rows.append({"scene": name, "error": " ".join(str(e).split())})
+    paths = showcase_scenes(scenes_dir)
+    names = [p.relative_to(scenes_dir).with_suffix("").as_posix() for p in paths]
+    rows: list[dict | None] = [None] * len(paths)
+
+    def done(index, outcome):  # one broken scene must not hide the others' results
+        if outcome["ok"]:
+            write_job_files(args.out / names[index], outcome["value"]["files"])
+            rows[index] = {**outcome["value"]["info"], "scene": names[index]}
+            print(f"[showcase] {names[index]}: FLIP {rows[index]['flip_mean']:.4f} "
+                  f"({outcome['job_s']:.1f} s on {outcome['host']})", file=sys.stderr, flush=True)
+        else:
+            if outcome.get("error_type") not in ("ValueError", "FileNotFoundError"):
+                print(f"[showcase] {names[index]}: {outcome.get('traceback', outcome['error'])}"
+                      "(a bug in mi_displace: please report it)", file=sys.stderr)
+            rows[index] = {"scene": names[index], "error": outcome["error"]}
+
+    run_jobs(compare_job, [{"scene_path": str(p), "max_spp": max_spp} for p in paths],
+             cluster=args.cluster, on_result=done, progress=True, desc="showcase")
+    failed = sum("error" in r for r in rows)
     table = summary_table(rows)
     panels = "\n".join(f"![{r['scene']}]({r['scene']}/panel.png)" for r in rows if "error" not in r)
     args.out.mkdir(parents=True, exist_ok=True)

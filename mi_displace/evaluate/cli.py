@@ -6,8 +6,10 @@
   FLIP ``F``, verified by a fresh render, printed as ``-D`` values (``DIR/tune.json``).
 * ``atlas --out DIR [--scenes DIR]``: every showcase scene's declared sweep on one HTML page
   (:mod:`mi_displace.evaluate.atlas`).
+* ``animate SCENE.xml --edit ID.PARAM=A:B [--edit ...] --frames N --out DIR``: frames of
+  ``mi.traverse`` edits (:mod:`mi_displace.evaluate.frames`), chunks of frames as jobs.
 
-All three take ``--cluster ADDRESS`` (a Dask scheduler, or ``local:N`` for N local worker
+All four take ``--cluster ADDRESS`` (a Dask scheduler, or ``local:N`` for N local worker
 processes), ``--max-spp`` and ``--cache DIR`` (finished points, keyed by code version).
 """
 from __future__ import annotations
@@ -87,6 +89,22 @@ def _cmd_atlas(args) -> int:
     return 1 if r["failures"] else 0
 
 
+def _cmd_animate(args) -> int:
+    from mi_displace.evaluate.frames import animate, parse_edit
+
+    r = animate(args.scene, [parse_edit(e) for e in args.edits], args.frames, args.out,
+                params=dict(args.defines), spp=args.spp, chunk=args.chunk, cluster=args.cluster,
+                progress=True)
+    for job, message in r["failed"].items():
+        print(f"  chunk {job}: failed ({message})")
+    written = [p for p in r["frames"] if p is not None]
+    times = [t for t in r["render_s"] if t is not None]
+    if times:
+        print(f"wrote {len(written)} frames to {args.out} "
+              f"(median render {sorted(times)[len(times) // 2]:.3g} s per frame)")
+    return 1 if r["failed"] else 0
+
+
 def add_commands(sub) -> dict:
     from mi_displace.cli import _define
 
@@ -113,4 +131,19 @@ def add_commands(sub) -> dict:
     p.add_argument("--scenes", type=Path, default=None, help="scene folder (default: the repo's)")
     _sweep_options(p)
     p.add_argument("--out", type=Path, required=True, help="output folder")
-    return {"tradeoff": _cmd_tradeoff, "tune": _cmd_tune, "atlas": _cmd_atlas}
+
+    from mi_displace.cli import _positive_int
+
+    p = sub.add_parser("animate", help="render frames of mi.traverse edits (chunks as jobs)")
+    p.add_argument("scene", type=Path, help="scene XML")
+    p.add_argument("--edit", dest="edits", action="append", default=[], required=True,
+                   metavar="ID.PARAM=START:STOP", help="parameter stepped over the frames")
+    p.add_argument("--frames", type=_positive_int, default=24, help="number of frames (24)")
+    p.add_argument("--spp", type=_positive_int, default=None, help="samples per pixel")
+    p.add_argument("--chunk", type=_positive_int, default=8, help="frames per job (8)")
+    p.add_argument("--cluster", default=None, metavar="ADDRESS",
+                   help="render the chunks on a Dask cluster: tcp://HOST:PORT, or local:N")
+    defines(p)
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    return {"tradeoff": _cmd_tradeoff, "tune": _cmd_tune, "atlas": _cmd_atlas,
+            "animate": _cmd_animate}

@@ -418,3 +418,29 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
     with open(out_dir / "metrics.json", "w") as f:
         json.dump(_finite_or_none(info), f, indent=2, allow_nan=False)
     return info
+
+
+def compare_job(scene_path: str, params: dict | None = None, **options) -> dict:
+    """:func:`compare` as an independent job (:func:`mi_displace.evaluate.jobs.run_jobs`).
+
+    The worker writes into a temporary folder of its own and returns the files' bytes, so a
+    worker on another machine needs no shared file system; :func:`write_job_files` writes
+    them on the caller's side.
+
+    Returns:
+        ``{"info": metrics dict, "files": {name: bytes}}``.
+    """
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="mi_displace_compare_") as tmp:
+        info = compare(scene_path, tmp, params=params, **options)
+        files = {p.name: p.read_bytes() for p in Path(tmp).iterdir() if p.is_file()}
+    return {"info": _finite_or_none(info), "files": files}
+
+
+def write_job_files(out_dir, files: dict) -> None:
+    """Write the ``{name: bytes}`` returned by :func:`compare_job` into ``out_dir``."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for name, data in files.items():
+        (out_dir / Path(name).name).write_bytes(data)

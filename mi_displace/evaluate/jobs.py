@@ -25,6 +25,7 @@ from __future__ import annotations
 import os
 import socket
 import time
+import traceback
 from typing import Callable, Iterable
 
 #: Scheduler address of a Dask cluster started for the caller on this machine.
@@ -43,6 +44,8 @@ def _run_one(fn: Callable, job: dict, variant: str) -> dict:
     except Exception as e:  # recorded, the sweep goes on (see module docstring)
         outcome = {"ok": False, "error": f"{type(e).__name__}: {' '.join(str(e).split())}",
                    "error_type": type(e).__name__}
+        if not isinstance(e, (ValueError, FileNotFoundError)):  # a bug: keep the traceback
+            outcome["traceback"] = traceback.format_exc()
     outcome.update(host=socket.gethostname(), pid=os.getpid(),
                    job_s=time.perf_counter() - start)
     return outcome
@@ -106,7 +109,8 @@ def run_jobs(fn: Callable, jobs: Iterable[dict], cluster: str | None = None,
 
     Returns:
         One outcome per job, in job order: ``{"ok": True, "value": fn's result}`` or
-        ``{"ok": False, "error": "Type: message", "error_type"}``, each with ``host``,
+        ``{"ok": False, "error": "Type: message", "error_type"}`` (and ``traceback`` for
+        exceptions other than ``ValueError`` / ``FileNotFoundError``), each with ``host``,
         ``pid`` and ``job_s`` (wall seconds on the worker).
     """
     import mitsuba as mi
