@@ -8,6 +8,7 @@ import mitsuba as mi
 
 from mi_displace.core.heightfield import pattern_defaults
 from mi_displace.plugins._height_texture import height_texture_base
+from mi_displace.plugins._guard import constructor
 
 
 class Ripples(height_texture_base()):
@@ -26,4 +27,4 @@ class Ripples(height_texture_base()):
 
 
 def register():
-    mi.register_texture("ripples", lambda props: Ripples(props))
+    mi.register_texture("ripples", constructor("ripples", Ripples))

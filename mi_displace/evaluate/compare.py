@@ -66,6 +66,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.core.io import to_srgb, write_exr
+from mi_displace.core.progress import stage
 from mi_displace.evaluate import metrics
 from mi_displace.render import scene as scenes
 
@@ -225,7 +226,8 @@ def _render_side(path, xml_params, mode, integrator, spp) -> tuple[dict, np.ndar
 
 
 def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024,
-            target_ratio: float = 0.2, warm_repeats: int = 3, progress: bool = False) -> dict:
+            target_ratio: float = 0.2, warm_repeats: int = 3,
+            progress: bool | None = False) -> dict:
     """Run the comparison protocol (module docstring) on one scene and write its outputs.
 
     Args:
@@ -235,7 +237,9 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
         max_spp: most samples per pixel of the averaged reference image (>= 2).
         target_ratio: required ``noise_floor_flip / flip_mean`` (0 < ratio <= 1).
         warm_repeats: warm load + render rounds of the approximation (>= 3).
-        progress: progress bars for long reference renders.
+        progress: a line per stage with its time (approximation rounds, reference build,
+            each reference round with its noise floor and FLIP) and bars over long
+            multi-pass renders; ``None``: only on a terminal (:mod:`mi_displace.core.progress`).
 
     Returns:
         The metrics dict also written to ``out_dir/metrics.json`` (keys: :data:`METRIC_KEYS`).
@@ -256,37 +260,44 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
 
     # 1. approximation: cold, then warm rounds
     approx_int, approx_spp = settings["approximation_integrator"], settings["approximation_spp"]
-    cold, approx, approx_render_cold = _render_side(
-        scene_path, xml_params, "approximation", approx_int, approx_spp)
-    warm_builds, warm_renders = [], []
-    for _ in range(warm_repeats):
-        warm, approx, seconds = _render_side(
+    with stage(f"{scene_path.name}: approximation ({approx_int}), cold", progress) as s:
+        cold, approx, approx_render_cold = _render_side(
             scene_path, xml_params, "approximation", approx_int, approx_spp)
-        warm_builds.append(warm["build_s"])
-        warm_renders.append(seconds)
+        s.note = f"build {cold['build_s']:.2f} s, render {approx_render_cold:.2f} s"
+    warm_builds, warm_renders = [], []
+    with stage(f"{scene_path.name}: approximation, {warm_repeats} warm rounds", progress):
+        for _ in range(warm_repeats):
+            warm, approx, seconds = _render_side(
+                scene_path, xml_params, "approximation", approx_int, approx_spp)
+            warm_builds.append(warm["build_s"])
+            warm_renders.append(seconds)
     approx_build_stats = warm["shapes"]
 
     # 2. reference: cold build (discarded), warm build, warm-up render, converging renders
     ref_int = settings["reference_integrator"]
     ref_params = dict(xml_params, mode="reference", integrator=ref_int)
-    ref_scene, ref_cold = scenes.load(scene_path, **ref_params)
-    del ref_scene
-    ref_scene, ref_warm = scenes.load(scene_path, **ref_params)
-    _, reference_render_cold = scenes.render(ref_scene, spp=1, seed=2**31)
+    with stage(f"{scene_path.name}: reference ({ref_int}), cold and warm build", progress):
+        ref_scene, ref_cold = scenes.load(scene_path, **ref_params)
+        del ref_scene
+        ref_scene, ref_warm = scenes.load(scene_path, **ref_params)
+        _, reference_render_cold = scenes.render(ref_scene, spp=1, seed=2**31)
     per_seed = max(1, min(ref_warm["spp"], max_spp // 2))
     images, count, rounds, render_s, spp_capped = [None, None], 0, [], 0.0, False
     while True:
         new = per_seed if count == 0 else count
-        for side in (0, 1):
-            image, seconds = scenes.render(
-                ref_scene, spp=new, seed=2 * len(rounds) + side, progress=progress)
-            metrics.assert_finite(image, f"reference image of {scene_path}")
-            render_s += seconds
-            images[side] = image if count == 0 else (images[side] * count + image * new) / (count + new)
-        count += new
-        reference = 0.5 * (images[0] + images[1])
-        noise_floor, _ = metrics.flip(images[0], images[1])
-        flip_mean, error_map = metrics.flip(reference, approx)
+        with stage(f"{scene_path.name}: reference round {len(rounds) + 1}, "
+                   f"{2 * (count + new)} spp", progress) as s:
+            for side in (0, 1):
+                image, seconds = scenes.render(
+                    ref_scene, spp=new, seed=2 * len(rounds) + side, progress=progress)
+                metrics.assert_finite(image, f"reference image of {scene_path}")
+                render_s += seconds
+                images[side] = image if count == 0 else (images[side] * count + image * new) / (count + new)
+            count += new
+            reference = 0.5 * (images[0] + images[1])
+            noise_floor, _ = metrics.flip(images[0], images[1])
+            flip_mean, error_map = metrics.flip(reference, approx)
+            s.note = f"noise floor {noise_floor:.4f}, FLIP {flip_mean:.4f}"
         rounds.append({"spp": 2 * count, "noise_floor_flip": noise_floor, "flip_mean": flip_mean})
         if noise_floor <= target_ratio * flip_mean:
             break
