@@ -18,6 +18,7 @@ terminal only.  Everything else passes through unchanged (a plugin's own ``Value
 """
 from __future__ import annotations
 
+import linecache
 import math
 import re
 from typing import Callable
@@ -43,19 +44,47 @@ def check_finite_floats(plugin: str, props: mi.Properties) -> None:
             raise ValueError(f"{plugin}: parameter {key!r} must be finite, got {value}")
 
 
+def _named_in_traceback(error: Exception, keys: list[str]) -> str | None:
+    """The key of ``keys`` that the failing code names, innermost frame first: as a string
+    literal in the failing line, or as the value of one of the frame's local variables."""
+    frames = []
+    tb = error.__traceback__
+    while tb is not None:
+        frames.append((tb.tb_frame, tb.tb_lineno))
+        tb = tb.tb_next
+    for frame, line_number in reversed(frames):
+        line = linecache.getline(frame.f_code.co_filename, line_number)
+        for key in keys:
+            if f'"{key}"' in line or f"'{key}'" in line:
+                return key
+        named = [key for key in keys if any(v == key for v in frame.f_locals.values()
+                                            if isinstance(v, str))]
+        if len(named) == 1:
+            return named[0]
+    return None
+
+
 def _offending_property(props: mi.Properties, error: Exception) -> tuple[str, str] | None:
-    """``(key, description)`` of the property behind a Python conversion error, if found."""
+    """``(quoted name(s), what was expected)`` of the property behind a Python conversion
+    error, or ``None`` when no property holds the offending value."""
     message = str(error)
     string_match = _STRING_CONVERSION.match(message)
     type_match = _TYPE_CONVERSION.match(message)
+    found = {}
     for key in props.keys():
         value = props[key]
         if string_match and isinstance(value, str) and value.strip() == string_match.group(1).strip():
-            return key, f"a number, got {value!r}"
+            found[key] = f"a number, got {value!r}"
         if type_match and type(value).__name__ == type_match.group(2):
             kind = "an integer" if type_match.group(1) == "int" else "a number"
-            return key, f"{kind}, got a {type(value).__name__} object"
-    return None
+            found[key] = f"{kind}, got a {type(value).__name__} object"
+    if not found:
+        return None
+    # several properties hold such a value (a texture as 'height' and as 'scale'): ask the code
+    key = next(iter(found)) if len(found) == 1 else _named_in_traceback(error, list(found))
+    if key is None:
+        return " or ".join(repr(k) for k in found), next(iter(found.values()))
+    return repr(key), found[key]
 
 
 def _summary(stats) -> str:
@@ -89,7 +118,7 @@ def constructor(plugin: str, cls: type) -> Callable[[mi.Properties], object]:
             found = _offending_property(props, error)
             if found is None:
                 raise
-            key, expected = found
-            raise ValueError(f"{plugin}: parameter {key!r} must be {expected}") from None
+            names, expected = found
+            raise ValueError(f"{plugin}: parameter {names} must be {expected}") from None
 
     return make
