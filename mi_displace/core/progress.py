@@ -52,6 +52,11 @@ def is_enabled(flag: bool | None = None) -> bool:
     env = os.environ.get(ENV, "").strip()
     if env in ("0", "1"):
         return env == "1"
+    return _stderr_is_terminal()
+
+
+def _stderr_is_terminal() -> bool:
+    """Whether stderr is an interactive terminal (progress is for people watching)."""
     return sys.stderr.isatty()
 
 
