@@ -33,6 +33,7 @@ import numpy as np
 
 from mi_displace.ddm.animation import Animation
 from mi_displace.ddm.model import BASE_PARAMS, DDMConfig, DDMModel
+from mi_displace.plugins._guard import constructor
 
 FLOAT_KEYS = ("gap_u", "gap_v", "w_offset", "u0", "v0", "height", "epsilon", "time", "tolerance")
 INT_KEYS = ("tiles_u", "tiles_v", "seed", "clamp_resolution")
@@ -135,4 +136,4 @@ class DDM(mi.Mesh):
 
 
 def register():
-    mi.register_shape("ddm", lambda props: DDM(props))
+    mi.register_shape("ddm", constructor("ddm", DDM))

@@ -142,7 +142,7 @@ path tracer reaches in the same time (– : nothing fits).</p>
 
 
 def atlas(out_dir, scenes_dir=None, max_spp: int = 1024, cluster: str | None = None,
-          cache_dir=None, progress: bool = False, warm_repeats: int = 3) -> dict:
+          cache_dir=None, progress: bool | None = False, warm_repeats: int = 3) -> dict:
     """Sweep every atlas scene and write ``index.html`` and ``atlas.json`` (module docstring).
 
     Returns:

@@ -45,7 +45,7 @@ def _cmd_tradeoff(args) -> int:
     from mi_displace.evaluate.tradeoff import tradeoff
 
     r = tradeoff(args.scene, _parsed_knobs(args), out_dir=args.out, params=dict(args.defines),
-                 max_spp=args.max_spp, cluster=args.cluster, cache_dir=args.cache, progress=True)
+                 max_spp=args.max_spp, cluster=args.cluster, cache_dir=args.cache, progress=None)
     print(f"reference {r['reference_spp']} spp{' (capped)' if r['spp_capped'] else ''}, "
           f"noise floor FLIP {r['noise_floor_flip']:.4f}")
     for p in r["points"]:
@@ -65,7 +65,7 @@ def _cmd_tune(args) -> int:
 
     r = tune(args.scene, args.flip, _parsed_knobs(args), out_dir=args.out,
              params=dict(args.defines), max_spp=args.max_spp, cluster=args.cluster,
-             cache_dir=args.cache, progress=True)
+             cache_dir=args.cache, progress=None)
     if r["chosen"] is None:
         print(f"no measured setting meets FLIP {args.flip} (reference noise floor "
               f"{r['noise_floor_flip']:.4f}); see {args.out}/tradeoff.csv")
@@ -82,7 +82,7 @@ def _cmd_atlas(args) -> int:
     from mi_displace.evaluate.atlas import atlas
 
     r = atlas(args.out, scenes_dir=args.scenes, max_spp=args.max_spp, cluster=args.cluster,
-              cache_dir=args.cache, progress=True)
+              cache_dir=args.cache, progress=None)
     for name, message in r["failures"].items():
         print(f"  {name}: failed ({message})")
     print(f"wrote {args.out}/index.html ({len(r['scenes'])} scenes)")
@@ -94,7 +94,7 @@ def _cmd_animate(args) -> int:
 
     r = animate(args.scene, [parse_edit(e) for e in args.edits], args.frames, args.out,
                 params=dict(args.defines), spp=args.spp, chunk=args.chunk, cluster=args.cluster,
-                progress=True)
+                progress=None)
     for job, message in r["failed"].items():
         print(f"  chunk {job}: failed ({message})")
     written = [p for p in r["frames"] if p is not None]

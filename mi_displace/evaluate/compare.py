@@ -67,6 +67,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.core.io import to_srgb, write_exr
+from mi_displace.core.progress import stage
 from mi_displace.evaluate import metrics
 from mi_displace.render import scene as scenes
 
@@ -233,7 +234,7 @@ def _render_side(path, xml_params, mode, integrator, spp, edits=None) -> tuple[d
 
 def measure_approximation(scene_path, xml_params: dict, integrator: str, spp: int | None,
                           warm_repeats: int = 3, mode: str = "approximation",
-                          edits: dict | None = None) -> dict:
+                          edits: dict | None = None, progress: bool | None = False) -> dict:
     """Step 1 of the protocol: the approximation rendered cold, then ``warm_repeats`` times.
 
     Args:
@@ -244,18 +245,25 @@ def measure_approximation(scene_path, xml_params: dict, integrator: str, spp: in
         warm_repeats: warm load + render rounds (the warm times are their medians).
         mode: the ``$mode`` to render (``approximation``, or another part of the scene).
         edits: ``mi.traverse`` parameters set after each load (see ``scene.apply_edits``).
+        progress: a line per stage (:mod:`mi_displace.core.progress`; ``None``: on a terminal).
 
     Returns:
         dict with ``image`` (linear float32 ``(H, W, 3)``, the last warm round),
         ``time_cold_s``, ``build_cold_s``, ``render_cold_s``, ``time_warm_s`` (median of
         build + render), ``build_s``, ``render_warm_s`` (medians) and ``build_stats``.
     """
-    cold, image, render_cold = _render_side(scene_path, xml_params, mode, integrator, spp, edits)
+    name = Path(scene_path).name
+    with stage(f"{name}: {mode} ({integrator}), cold", progress) as s:
+        cold, image, render_cold = _render_side(scene_path, xml_params, mode, integrator, spp,
+                                                edits)
+        s.note = f"build {cold['build_s']:.2f} s, render {render_cold:.2f} s"
     builds, renders = [], []
-    for _ in range(warm_repeats):
-        warm, image, seconds = _render_side(scene_path, xml_params, mode, integrator, spp, edits)
-        builds.append(warm["build_s"])
-        renders.append(seconds)
+    with stage(f"{name}: {mode}, {warm_repeats} warm rounds", progress):
+        for _ in range(warm_repeats):
+            warm, image, seconds = _render_side(scene_path, xml_params, mode, integrator, spp,
+                                                edits)
+            builds.append(warm["build_s"])
+            renders.append(seconds)
     return {
         "image": image,
         "time_cold_s": cold["build_s"] + render_cold,
@@ -270,7 +278,7 @@ def measure_approximation(scene_path, xml_params: dict, integrator: str, spp: in
 
 def converge_reference(scene_path, xml_params: dict, integrator: str, approximations: list,
                        target_ratio: float = 0.2, max_spp: int = 1024,
-                       progress: bool = False) -> dict:
+                       progress: bool | None = False) -> dict:
     """Step 2 of the protocol: a reference converged against the given approximations.
 
     Two independent images (seed streams 0 and 1) get as many new samples again each round
@@ -282,7 +290,8 @@ def converge_reference(scene_path, xml_params: dict, integrator: str, approximat
         integrator: the reference's integrator plugin type.
         approximations: linear ``(H, W, 3)`` images the reference must resolve (>= 1).
         target_ratio, max_spp: see :func:`compare`.
-        progress: progress bars for long renders.
+        progress: a line per stage (build, each round with its noise floor and FLIP) and bars
+            over long multi-pass renders (:mod:`mi_displace.core.progress`).
 
     Returns:
         dict with ``reference`` (the average of the two images), ``images`` (the two),
@@ -292,26 +301,31 @@ def converge_reference(scene_path, xml_params: dict, integrator: str, approximat
         ``render_cold_s`` (a 1-spp warm-up), ``build_stats`` and ``scene`` (the loaded
         reference scene, for further renders).
     """
+    name = Path(scene_path).name
     ref_params = dict(xml_params, mode="reference", integrator=integrator)
-    ref_scene, ref_cold = scenes.load(scene_path, **ref_params)
-    del ref_scene
-    ref_scene, ref_warm = scenes.load(scene_path, **ref_params)
-    _, render_cold = scenes.render(ref_scene, spp=1, seed=2**31)
+    with stage(f"{name}: reference ({integrator}), cold and warm build", progress):
+        ref_scene, ref_cold = scenes.load(scene_path, **ref_params)
+        del ref_scene
+        ref_scene, ref_warm = scenes.load(scene_path, **ref_params)
+        _, render_cold = scenes.render(ref_scene, spp=1, seed=2**31)
     per_seed = max(1, min(ref_warm["spp"], max_spp // 2))
     images, count, rounds, render_s, spp_capped = [None, None], 0, [], 0.0, False
     while True:
         new = per_seed if count == 0 else count
-        for side in (0, 1):
-            image, seconds = scenes.render(
-                ref_scene, spp=new, seed=2 * len(rounds) + side, progress=progress)
-            metrics.assert_finite(image, f"reference image of {scene_path}")
-            render_s += seconds
-            images[side] = image if count == 0 else (images[side] * count + image * new) / (count + new)
-        count += new
-        reference = 0.5 * (images[0] + images[1])
-        noise_floor, _ = metrics.flip(images[0], images[1])
-        results = [metrics.flip(reference, a) for a in approximations]
-        flips = [f for f, _ in results]
+        with stage(f"{name}: reference round {len(rounds) + 1}, {2 * (count + new)} spp",
+                   progress) as s:
+            for side in (0, 1):
+                image, seconds = scenes.render(
+                    ref_scene, spp=new, seed=2 * len(rounds) + side, progress=progress)
+                metrics.assert_finite(image, f"reference image of {scene_path}")
+                render_s += seconds
+                images[side] = image if count == 0 else (images[side] * count + image * new) / (count + new)
+            count += new
+            reference = 0.5 * (images[0] + images[1])
+            noise_floor, _ = metrics.flip(images[0], images[1])
+            results = [metrics.flip(reference, a) for a in approximations]
+            flips = [f for f, _ in results]
+            s.note = f"noise floor {noise_floor:.4f}, FLIP {min(flips):.4f}"
         rounds.append({"spp": 2 * count, "noise_floor_flip": noise_floor,
                        "flip_mean": min(flips)})
         if noise_floor <= target_ratio * min(flips):
@@ -329,7 +343,8 @@ def converge_reference(scene_path, xml_params: dict, integrator: str, approximat
 
 
 def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024,
-            target_ratio: float = 0.2, warm_repeats: int = 3, progress: bool = False) -> dict:
+            target_ratio: float = 0.2, warm_repeats: int = 3,
+            progress: bool | None = False) -> dict:
     """Run the comparison protocol (module docstring) on one scene and write its outputs.
 
     Args:
@@ -339,7 +354,9 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
         max_spp: most samples per pixel of the averaged reference image (>= 2).
         target_ratio: required ``noise_floor_flip / flip_mean`` (0 < ratio <= 1).
         warm_repeats: warm load + render rounds of the approximation (>= 3).
-        progress: progress bars for long reference renders.
+        progress: a line per stage with its time (approximation rounds, reference build,
+            each reference round with its noise floor and FLIP) and bars over long
+            multi-pass renders; ``None``: only on a terminal (:mod:`mi_displace.core.progress`).
 
     Returns:
         The metrics dict also written to ``out_dir/metrics.json`` (keys: :data:`METRIC_KEYS`).
@@ -360,7 +377,8 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
 
     # 1. approximation: cold, then warm rounds
     approx_int, approx_spp = settings["approximation_integrator"], settings["approximation_spp"]
-    measured = measure_approximation(scene_path, xml_params, approx_int, approx_spp, warm_repeats)
+    measured = measure_approximation(scene_path, xml_params, approx_int, approx_spp, warm_repeats,
+                                     progress=progress)
     approx = measured["image"]
 
     # 2. reference: cold build (discarded), warm build, warm-up render, converging renders

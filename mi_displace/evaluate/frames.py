@@ -76,7 +76,7 @@ def render_chunk(scene_path: str, params: dict, frames: list[tuple[int, dict]],
 
 def animate(scene_path, edits: list[tuple[str, float, float]], frames: int, out_dir,
             params: dict | None = None, spp: int | None = None, seed: int = 0,
-            chunk: int = 8, cluster: str | None = None, progress: bool = False) -> dict:
+            chunk: int = 8, cluster: str | None = None, progress: bool | None = False) -> dict:
     """Render the frames (module docstring) and write ``out_dir/frame_NNNN.png``.
 
     Args:

@@ -95,7 +95,8 @@ class _Cluster:
 
 
 def run_jobs(fn: Callable, jobs: Iterable[dict], cluster: str | None = None,
-             on_result: Callable[[int, dict], None] | None = None, progress: bool = False,
+             on_result: Callable[[int, dict], None] | None = None,
+             progress: bool | None = False,
              desc: str = "jobs") -> list[dict]:
     """Run ``fn(**job)`` for each job, locally or on a cluster.
 
@@ -104,7 +105,8 @@ def run_jobs(fn: Callable, jobs: Iterable[dict], cluster: str | None = None,
         jobs: keyword arguments of each call (picklable).
         cluster: ``None``, ``"local:N"`` or a scheduler address (module docstring).
         on_result: called with ``(index, outcome)`` as each job finishes.
-        progress: a tqdm bar over the jobs (with an ETA).
+        progress: a bar over the jobs with an ETA (``None``: on a terminal,
+            :mod:`mi_displace.core.progress`).
         desc: the bar's label.
 
     Returns:
@@ -114,7 +116,8 @@ def run_jobs(fn: Callable, jobs: Iterable[dict], cluster: str | None = None,
         ``pid`` and ``job_s`` (wall seconds on the worker).
     """
     import mitsuba as mi
-    from tqdm import tqdm
+
+    from mi_displace.core.progress import bar as progress_bar
 
     check_cluster(cluster)
     jobs = list(jobs)
@@ -122,7 +125,7 @@ def run_jobs(fn: Callable, jobs: Iterable[dict], cluster: str | None = None,
     if variant is None:
         raise RuntimeError("no Mitsuba variant is set: call mi_displace.init() first")
     outcomes: list[dict | None] = [None] * len(jobs)
-    bar = tqdm(total=len(jobs), desc=desc, unit="job", disable=not progress, leave=False)
+    bar = progress_bar(len(jobs), desc, "job", enabled=progress)
 
     def finish(index, outcome):
         outcomes[index] = outcome

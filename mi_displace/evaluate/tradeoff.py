@@ -316,7 +316,7 @@ def path_curve(ref: dict, spps: list[int], seed_base: int = 1 << 20) -> list[dic
 
 def tradeoff(scene_path, knobs: list[Knob], out_dir=None, params: dict | None = None,
              max_spp: int = 1024, target_ratio: float = 0.2, warm_repeats: int = 3,
-             cluster: str | None = None, cache_dir=None, progress: bool = False,
+             cluster: str | None = None, cache_dir=None, progress: bool | None = False,
              path_spps: list[int] | None = None) -> dict:
     """Sweep ``knobs`` on a comparison scene (module docstring); write CSV, JSON and a plot.
 
