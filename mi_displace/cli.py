@@ -30,6 +30,7 @@ import importlib
 import pkgutil
 import re
 import sys
+import traceback
 from pathlib import Path
 
 from mi_displace.core import progress
@@ -241,8 +242,7 @@ def _cmd_showcase(args) -> int:
         else:
             if outcome.get("error_type") not in ("ValueError", "FileNotFoundError"):
                 print(f"{progress.PREFIX} showcase {names[index]}: "
-                      f"{outcome.get('traceback', outcome['error'])}"
-                      "(a bug in mi_displace: please report it)", file=sys.stderr)
+                      f"{outcome.get('traceback', outcome['error'])}{BUG_HINT}", file=sys.stderr)
             rows[index] = {"scene": names[index], "error": outcome["error"]}
 
     run_jobs(compare_job, [{"scene_path": str(p), "max_spp": max_spp, "progress": None}
