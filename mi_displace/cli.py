@@ -1,8 +1,9 @@
-"""Command line interface: ``mi-displace [--variant V] {render,compare,showcase,bench} ...``.
+"""Command line interface: ``mi-displace [--variant V] [--quiet] {render,compare,showcase,bench} ...``.
 
 * ``render SCENE.xml [-D name=value ...] [--spp N] [--seed S] --out IMG.(exr|png)``
-* ``compare SCENE.xml --out DIR [-D name=value ...] [--max-spp N] [--target-ratio R]``
-  runs the comparison protocol (:mod:`mi_displace.evaluate.compare`).
+* ``compare SCENE.xml --out DIR [-D name=value ...] [--quick] [--max-spp N] [--target-ratio R]``
+  runs the comparison protocol (:mod:`mi_displace.evaluate.compare`); ``--quick`` caps the
+  reference at :data:`QUICK_MAX_SPP` samples per pixel, as for ``showcase``.
 * ``showcase --out DIR [--quick] [--scenes DIR] [--max-spp N]`` compares every scene marked
   ``<!-- showcase -->`` under the repository's ``scenes/`` folder (or ``--scenes``), writes
   ``DIR/<scene>/...`` and ``DIR/summary.md`` and prints the summary table.  ``--quick``
@@ -13,8 +14,14 @@
   ``add_commands(sub) -> dict[str, Callable[[argparse.Namespace], int]]``, which adds its
   sub-parsers to ``sub`` and returns the handler of each command name it added.
 
-Bad input (missing file, bad parameter, unknown name) prints one line to stderr and exits
-with status 2, like argparse's own usage errors; a missing or too old LLVM exits with 1.
+Long work reports a line per stage with its time on stderr when stderr is a terminal
+(:mod:`mi_displace.core.progress`); ``--quiet`` silences it, ``MI_DISPLACE_PROGRESS=1``
+forces it into logs.
+
+Bad input (missing file, bad parameter, unknown name, a variant this machine lacks) prints
+one line to stderr and exits with status 2, like argparse's own usage errors; a missing or
+too old LLVM exits with 1.  Any other exception is a bug in mi_displace: its traceback is
+printed with a line asking to report it (:data:`BUG_HINT`), exit status 1.
 """
 from __future__ import annotations
 
@@ -25,6 +32,9 @@ import re
 import sys
 import traceback
 from pathlib import Path
+
+from mi_displace.core import progress
+from mi_displace.core.progress import stage
 
 QUICK_MAX_SPP = 64
 DEFAULT_MAX_SPP = 1024
@@ -41,7 +51,12 @@ SUMMARY_COLUMNS = (
 COMMAND_MODULES = [
     "mi_displace.ddm.cli",
     "mi_displace.bake.cli",
+    "mi_displace.evaluate.cli",
 ]
+
+
+BUG_HINT = ("mi-displace: internal error (a bug in mi_displace, not in your input): please "
+            "report it with the command line and the traceback above")
 
 
 class UsageError(ValueError):
@@ -88,7 +103,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="mi-displace", description="Displacement mapping for Mitsuba 3: render, compare, benchmark.")
     parser.add_argument("--variant", help="Mitsuba variant (default: $MI_DISPLACE_VARIANT or llvm_ad_rgb)")
+    parser.add_argument("--quiet", action="store_true",
+                        help="no progress lines (default: shown when stderr is a terminal)")
     sub = parser.add_subparsers(dest="command", required=True)
+
+    def quick_and_max_spp(p):
+        p.add_argument("--quick", action="store_true", help=f"cap references at {QUICK_MAX_SPP} spp")
+        p.add_argument("--max-spp", type=_positive_int, default=None,
+                       help=f"most reference spp (default {DEFAULT_MAX_SPP}, {QUICK_MAX_SPP} with --quick)")
 
     def defines(p):
         p.add_argument("-D", dest="defines", metavar="NAME=VALUE", action="append", type=_define,
@@ -106,18 +128,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene", type=Path, help="scene XML file following the comparison convention")
     defines(p)
     p.add_argument("--out", type=Path, required=True, help="output folder")
-    p.add_argument("--max-spp", type=_positive_int, default=DEFAULT_MAX_SPP,
-                   help=f"most samples per pixel of the reference (default {DEFAULT_MAX_SPP})")
+    quick_and_max_spp(p)
     p.add_argument("--target-ratio", type=float, default=0.2,
                    help="required noise floor / FLIP ratio (default 0.2)")
 
     p = sub.add_parser("showcase", help="compare every scene marked <!-- showcase -->")
     p.add_argument("--out", type=Path, required=True, help="output folder")
-    p.add_argument("--quick", action="store_true", help=f"cap references at {QUICK_MAX_SPP} spp")
     p.add_argument("--scenes", type=Path, default=None,
                    help=f"scene folder (default {default_scenes_dir()})")
-    p.add_argument("--max-spp", type=_positive_int, default=None,
-                   help=f"most reference spp (default {DEFAULT_MAX_SPP}, {QUICK_MAX_SPP} with --quick)")
+    quick_and_max_spp(p)
+    p.add_argument("--cluster", default=None, metavar="ADDRESS",
+                   help="compare the scenes as jobs on a Dask cluster (tcp://HOST:PORT, or local:N)")
 
     p = sub.add_parser("bench", help="run a benchmark module mi_displace.bench.NAME")
     p.add_argument("name", help="benchmark name")
@@ -159,8 +180,10 @@ def _cmd_render(args) -> int:
     from mi_displace.render.scene import load, render
 
     image_format(args.out, "--out")
-    scene, timings = load(args.scene, **dict(args.defines))
-    image, seconds = render(scene, spp=args.spp, seed=args.seed, progress=True)
+    with stage(f"loading {args.scene}"):
+        scene, timings = load(args.scene, **dict(args.defines))
+    with stage(f"rendering {args.scene.name}"):
+        image, seconds = render(scene, spp=args.spp, seed=args.seed, progress=None)
     assert_finite(image, f"rendered image of {args.scene}")
     write_image(args.out, image, bits=args.bits)
     spp = args.spp or timings["spp"]
@@ -169,11 +192,16 @@ def _cmd_render(args) -> int:
     return 0
 
 
+def _max_spp(args) -> int:
+    """The reference spp cap of ``compare`` / ``showcase``: ``--max-spp``, else by ``--quick``."""
+    return args.max_spp or (QUICK_MAX_SPP if args.quick else DEFAULT_MAX_SPP)
+
+
 def _cmd_compare(args) -> int:
     from mi_displace.evaluate.compare import compare
 
-    r = compare(args.scene, args.out, params=dict(args.defines), max_spp=args.max_spp,
-                target_ratio=args.target_ratio, progress=True)
+    r = compare(args.scene, args.out, params=dict(args.defines), max_spp=_max_spp(args),
+                target_ratio=args.target_ratio, progress=None)
     capped = ", capped" if r["spp_capped"] else ""
     print(f"{args.scene}: FLIP {r['flip_mean']:.4f} (noise floor {r['noise_floor_flip']:.4f}), "
           f"relMSE {r['relmse']:.4g}, PSNR {_fmt(r['psnr'])} dB, SSIM {r['ssim']:.4f}\n"
@@ -194,21 +222,33 @@ def showcase_scenes(scenes_dir: Path) -> list[Path]:
 
 
 def _cmd_showcase(args) -> int:
-    from mi_displace.evaluate.compare import compare
+    from mi_displace.evaluate.compare import compare_job, write_job_files
+    from mi_displace.evaluate.jobs import check_cluster, run_jobs
 
+    check_cluster(args.cluster)
     scenes_dir = args.scenes or default_scenes_dir()
-    max_spp = args.max_spp or (QUICK_MAX_SPP if args.quick else DEFAULT_MAX_SPP)
-    rows, failed = [], 0
-    for path in showcase_scenes(scenes_dir):
-        name = path.relative_to(scenes_dir).with_suffix("").as_posix()
-        print(f"[showcase] {name} ...", file=sys.stderr, flush=True)
-        try:
-            rows.append({**compare(path, args.out / name, max_spp=max_spp, progress=True), "scene": name})
-        except Exception as e:  # one broken scene must not hide the others' results
-            failed += 1
-            if not isinstance(e, (ValueError, FileNotFoundError)):
-                traceback.print_exc()
-            rows.append({"scene": name, "error": " ".join(str(e).split())})
+    max_spp = _max_spp(args)
+    paths = showcase_scenes(scenes_dir)
+    names = [p.relative_to(scenes_dir).with_suffix("").as_posix() for p in paths]
+    rows: list[dict | None] = [None] * len(paths)
+
+    def done(index, outcome):  # one broken scene must not hide the others' results
+        if outcome["ok"]:
+            write_job_files(args.out / names[index], outcome["value"]["files"])
+            rows[index] = {**outcome["value"]["info"], "scene": names[index]}
+            print(f"{progress.PREFIX} showcase {names[index]}: FLIP {rows[index]['flip_mean']:.4f}, "
+                  f"speed-up {rows[index]['speedup']:.3g}x ({outcome['job_s']:.1f} s on "
+                  f"{outcome['host']})", file=sys.stderr, flush=True)
+        else:
+            if outcome.get("error_type") not in ("ValueError", "FileNotFoundError"):
+                print(f"{progress.PREFIX} showcase {names[index]}: "
+                      f"{outcome.get('traceback', outcome['error'])}{BUG_HINT}", file=sys.stderr)
+            rows[index] = {"scene": names[index], "error": outcome["error"]}
+
+    run_jobs(compare_job, [{"scene_path": str(p), "max_spp": max_spp, "progress": None}
+                           for p in paths],
+             cluster=args.cluster, on_result=done, progress=None, desc="showcase")
+    failed = sum("error" in r for r in rows)
     table = summary_table(rows)
     panels = "\n".join(f"![{r['scene']}]({r['scene']}/panel.png)" for r in rows if "error" not in r)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -243,13 +283,14 @@ COMMANDS = {"render": _cmd_render, "compare": _cmd_compare, "showcase": _cmd_sho
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``mi-displace`` console script.
 
-    Returns 0 on success; raises ``SystemExit(2)`` on bad input (one line on stderr) and
-    ``SystemExit(1)`` when the LLVM backend is unusable.
+    Returns 0 on success; raises ``SystemExit(2)`` on bad input (one line on stderr),
+    ``SystemExit(1)`` when the LLVM backend is unusable or on a bug (traceback + hint).
     """
     import mi_displace
     from mi_displace.core.backend import LLVMVersionError
 
     args = build_parser().parse_args(argv)
+    progress.set_enabled(False if args.quiet else None)
     try:
         mi_displace.init(args.variant)
         handler = getattr(args, "handler", None) or COMMANDS[args.command]
@@ -259,6 +300,13 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(2) from None
     except LLVMVersionError as e:
         print(f"mi-displace: error: {e}", file=sys.stderr)
+        raise SystemExit(1) from None
+    except KeyboardInterrupt:
+        print("mi-displace: interrupted", file=sys.stderr)
+        raise SystemExit(130) from None
+    except Exception:
+        traceback.print_exc()
+        print(BUG_HINT, file=sys.stderr)
         raise SystemExit(1) from None
 
 

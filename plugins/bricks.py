@@ -9,6 +9,7 @@ See :func:`mi_displace.core.heightfield.bricks`.
 import mitsuba as mi
 
 from mi_displace.plugins._height_texture import height_texture_base
+from mi_displace.plugins._guard import constructor
 
 
 class Bricks(height_texture_base()):
@@ -16,4 +17,4 @@ class Bricks(height_texture_base()):
 
 
 def register():
-    mi.register_texture("bricks", lambda props: Bricks(props))
+    mi.register_texture("bricks", constructor("bricks", Bricks))

@@ -7,6 +7,7 @@ default 0), ``to_uv``. See :func:`mi_displace.core.heightfield.cells`.
 import mitsuba as mi
 
 from mi_displace.plugins._height_texture import height_texture_base
+from mi_displace.plugins._guard import constructor
 
 
 class Cells(height_texture_base()):
@@ -14,4 +15,4 @@ class Cells(height_texture_base()):
 
 
 def register():
-    mi.register_texture("cells", lambda props: Cells(props))
+    mi.register_texture("cells", constructor("cells", Cells))

@@ -35,6 +35,7 @@ import numpy as np
 
 from mi_displace.ddm.animation import Animation
 from mi_displace.ddm.model import BASE_PARAMS, DDMConfig, DDMModel
+from mi_displace.plugins._guard import constructor
 
 FLOAT_KEYS = ("gap_u", "gap_v", "w_offset", "u0", "v0", "height", "epsilon", "time", "tolerance",
               "dicing_rate")
@@ -156,4 +157,4 @@ class DDM(mi.Mesh):
 
 
 def register():
-    mi.register_shape("ddm", lambda props: DDM(props))
+    mi.register_shape("ddm", constructor("ddm", DDM))

@@ -29,6 +29,7 @@ import numpy as np
 from mi_displace.core import surfaces, tessellate
 from mi_displace.core.mesh_io import load_uv_mesh
 from mi_displace.core.texture_height import check_texture_finite, height_function
+from mi_displace.plugins._guard import constructor
 
 BASE_PARAMS = {
     "plane": (),
@@ -149,4 +150,4 @@ class Displaced(mi.Mesh):
 
 
 def register():
-    mi.register_shape("displaced", lambda props: Displaced(props))
+    mi.register_shape("displaced", constructor("displaced", Displaced))

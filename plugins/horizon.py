@@ -26,6 +26,7 @@ from mi_displace.plugins.vdm import MesostructureBSDF, _number
 from mi_displace.vdm import table
 from mi_displace.vdm.frame import TiledHeight, TileFrame, shading_interaction
 from mi_displace.vdm.horizon import HorizonLookup, horizon_table
+from mi_displace.plugins._guard import constructor
 
 
 class Horizon(MesostructureBSDF):
@@ -70,4 +71,4 @@ class Horizon(MesostructureBSDF):
 
 
 def register():
-    mi.register_bsdf("horizon", lambda props: Horizon(props))
+    mi.register_bsdf("horizon", constructor("horizon", Horizon))

@@ -13,6 +13,7 @@
 import mitsuba as mi
 
 from mi_displace.render import raster
+from mi_displace.plugins._guard import constructor
 
 
 class Raster(mi.SamplingIntegrator):
@@ -40,4 +41,4 @@ class Raster(mi.SamplingIntegrator):
 
 
 def register():
-    mi.register_integrator("raster", lambda props: Raster(props))
+    mi.register_integrator("raster", constructor("raster", Raster))

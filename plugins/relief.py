@@ -23,6 +23,7 @@ import mitsuba as mi
 from mi_displace.plugins.vdm import MesostructureBSDF, _number
 from mi_displace.vdm.frame import TiledHeight, TileFrame, shading_interaction
 from mi_displace.vdm.relief import march_shadow, march_view
+from mi_displace.plugins._guard import constructor
 
 
 class Relief(MesostructureBSDF):
@@ -72,4 +73,4 @@ class Relief(MesostructureBSDF):
 
 
 def register():
-    mi.register_bsdf("relief", lambda props: Relief(props))
+    mi.register_bsdf("relief", constructor("relief", Relief))

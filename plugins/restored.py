@@ -21,6 +21,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.bake.restore import low_for_map, restore
+from mi_displace.plugins._guard import constructor
 
 
 class Restored(mi.Mesh):
@@ -56,4 +57,4 @@ class Restored(mi.Mesh):
 
 
 def register():
-    mi.register_shape("restored", lambda props: Restored(props))
+    mi.register_shape("restored", constructor("restored", Restored))

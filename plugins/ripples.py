@@ -6,8 +6,9 @@ transform). See :func:`mi_displace.core.heightfield.ripples`.
 """
 import mitsuba as mi
 
-from mi_displace.core.heightfield import pattern_defaults
+from mi_displace.core.heightfield import check_real, pattern_defaults
 from mi_displace.plugins._height_texture import height_texture_base
+from mi_displace.plugins._guard import constructor
 
 
 class Ripples(height_texture_base()):
@@ -15,7 +16,8 @@ class Ripples(height_texture_base()):
 
     def read_properties(self, props):
         defaults = pattern_defaults("ripples")
-        frequency = props.get("frequency", defaults["frequency"])
+        # checked under its own name: it is only the default of the two per-axis values
+        frequency = check_real("ripples", "frequency", props.get("frequency", defaults["frequency"]))
         return {"frequency_u": props.get("frequency_u", frequency),
                 "frequency_v": props.get("frequency_v", frequency),
                 "phase": props.get("phase", defaults["phase"])}
@@ -26,4 +28,4 @@ class Ripples(height_texture_base()):
 
 
 def register():
-    mi.register_texture("ripples", lambda props: Ripples(props))
+    mi.register_texture("ripples", constructor("ripples", Ripples))

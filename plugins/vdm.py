@@ -36,6 +36,7 @@ from mi_displace.core.texture_height import check_texture_finite
 from mi_displace.vdm import build, table
 from mi_displace.vdm.lookup import cached_lookup
 from mi_displace.vdm.steps import VDMSteps
+from mi_displace.plugins._guard import constructor
 
 
 def _number(props, name, default, low=None, high=None, integer=False):
@@ -154,7 +155,7 @@ class MesostructureBSDF(mi.BSDF):
 
     def _require(self, ready: bool) -> None:
         if not ready:
-            raise RuntimeError(
+            raise ValueError(
                 f"{self.PLUGIN}: BSDF {self.id()!r} is not set up: put it inside a "
                 "<shape type=\"vdm_mesh\"> (tile size and curvature measured there) or give "
                 "'tile_size' [world units of one texture tile]")
@@ -349,4 +350,4 @@ class VDM(MesostructureBSDF):
 
 
 def register():
-    mi.register_bsdf("vdm", lambda props: VDM(props))
+    mi.register_bsdf("vdm", constructor("vdm", VDM))

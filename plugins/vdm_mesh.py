@@ -35,6 +35,7 @@ from mi_displace.core.mesh_io import load_uv_mesh
 from mi_displace.plugins.displaced import BASE_PARAMS
 from mi_displace.vdm import mesh_curvature
 from mi_displace.vdm.steps import KDIAG, KOFF
+from mi_displace.plugins._guard import constructor
 
 
 def _columns(v) -> np.ndarray:
@@ -96,4 +97,4 @@ class VDMMesh(mi.Mesh):
 
 
 def register():
-    mi.register_shape("vdm_mesh", lambda props: VDMMesh(props))
+    mi.register_shape("vdm_mesh", constructor("vdm_mesh", VDMMesh))

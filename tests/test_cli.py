@@ -1,5 +1,6 @@
 """The mi-displace command line: render, compare, showcase, bench, and its error handling."""
 import json
+import re
 import shutil
 import sys
 import types
@@ -106,3 +107,127 @@ def test_bench_dispatches_to_the_module(variant, monkeypatch):
 
 def test_default_scene_folder_is_the_repository_s():
     assert cli.default_scenes_dir() == Path(__file__).resolve().parents[1] / "scenes"
+
+
+BARE_SCENE = """<scene version="3.0.0">
+    {integrator}
+    <sensor type="perspective">
+        <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
+    </sensor>
+    <emitter type="constant"/>
+    {shape}
+</scene>"""
+
+
+def _bare(tmp_path, shape, integrator='<integrator type="path"/>', name="s.xml"):
+    path = tmp_path / name
+    path.write_text(BARE_SCENE.format(integrator=integrator, shape=shape))
+    return str(path)
+
+
+def _one_line(err):
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+def test_user_errors_found_while_rendering_are_one_line(variant, tmp_path, capsys):
+    exr = str(tmp_path / "x.exr")
+    outside = _bare(tmp_path, '<shape type="sphere"><bsdf type="vdm">'
+                              '<texture name="height" type="cells"/></bsdf></shape>')
+    _one_line(_fails_with_2(capsys, ["render", outside, "--out", exr], 'inside a <shape type="vdm_mesh">'))
+    no_integrator = _bare(tmp_path, '<shape type="sphere"/>', integrator="", name="n.xml")
+    _one_line(_fails_with_2(capsys, ["render", no_integrator, "--out", exr], "n.xml' has no <integrator>"))
+    assert not (tmp_path / "x.exr").exists()
+
+
+@pytest.mark.parametrize("element, message", [
+    ('<float name="scale" value="big"/>', "float 'scale': could not parse floating point value"),
+    ('<integer name="resolution" value="many"/>', "integer 'resolution': could not parse integer"),
+    ('<string name="scale" value="big"/>', "displaced: parameter 'scale' must be a number, got 'big'"),
+    ('<string name="resolution" value="many"/>', "parameter 'resolution' must be a number, got 'many'"),
+    ('<float name="midlevel" value="nan"/>', "displaced: parameter 'midlevel' must be finite, got nan"),
+])
+def test_bad_values_in_xml_name_the_parameter(variant, tmp_path, capsys, element, message):
+    scene = _bare(tmp_path, f'<shape type="displaced"><string name="base" value="sphere"/>{element}'
+                            '<texture name="height" type="cells"/></shape>')
+    _one_line(_fails_with_2(capsys, ["render", scene, "--out", str(tmp_path / "x.exr")], message))
+
+
+def test_a_variant_the_machine_lacks_is_a_usage_error(tmp_path, capsys):
+    import drjit as dr
+
+    if dr.has_backend(dr.JitBackend.CUDA):
+        pytest.skip("this machine has a CUDA GPU")
+    _one_line(_fails_with_2(capsys, ["--variant", "cuda_ad_rgb", "render", SCENE, "--out",
+                                     str(tmp_path / "x.exr")], "needs a CUDA GPU"))
+
+
+def test_a_bug_prints_its_traceback_and_asks_for_a_report(variant, monkeypatch, capsys):
+    def broken(json=None):
+        return {}["no such key"]
+
+    fake = types.ModuleType("mi_displace.bench.broken")
+    fake.main = broken
+    monkeypatch.setitem(sys.modules, "mi_displace.bench.broken", fake)
+    monkeypatch.setattr(cli, "bench_names", lambda: ["broken"])
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["--variant", variant, "bench", "broken"])
+    assert exit_info.value.code == 1
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "KeyError: 'no such key'" in err
+    assert err.strip().splitlines()[-1] == cli.BUG_HINT
+
+
+def test_compare_quick_caps_the_reference(variant, tmp_path, monkeypatch):
+    seen = {}
+
+    def fake_compare(scene, out, max_spp, **kw):
+        seen["max_spp"] = max_spp
+        return {"spp_capped": True, "flip_mean": 0.1, "noise_floor_flip": 0.05, "relmse": 0.1,
+                "psnr": 20.0, "ssim": 0.9, "reference_spp": max_spp, "reference_time_s": 1.0,
+                "approx_time_warm_s": 0.1, "approx_time_cold_s": 0.2, "speedup": 10.0}
+
+    import mi_displace.evaluate.compare as compare_module
+
+    monkeypatch.setattr(compare_module, "compare", fake_compare)
+    for flags, expected in (([], cli.DEFAULT_MAX_SPP), (["--quick"], cli.QUICK_MAX_SPP),
+                            (["--quick", "--max-spp", "8"], 8)):
+        assert cli.main(["--variant", variant, "compare", SCENE, "--out", str(tmp_path)] + flags) == 0
+        assert seen["max_spp"] == expected
+
+
+@pytest.mark.parametrize("quiet, env, shown", [(False, "1", True), (True, "1", False), (False, "0", False),
+                                               (False, None, False)])
+def test_progress_lines_per_stage(variant, tmp_path, capsys, monkeypatch, quiet, env, shown):
+    """A line per stage (scene load, the plugin's build, render) with its time; none with
+    --quiet, MI_DISPLACE_PROGRESS=0, or (the default) when stderr is not a terminal."""
+    if env is None:
+        monkeypatch.delenv("MI_DISPLACE_PROGRESS", raising=False)
+    else:
+        monkeypatch.setenv("MI_DISPLACE_PROGRESS", env)
+    scene = _bare(tmp_path, '<shape type="displaced" id="rock"><string name="base" value="sphere"/>'
+                            '<integer name="resolution" value="16"/>'
+                            '<texture name="height" type="cells"/></shape>')
+    argv = ["--variant", variant] + (["--quiet"] if quiet else []) + [
+        "render", scene, "--out", str(tmp_path / "x.exr")]
+    try:
+        assert cli.main(argv) == 0
+    finally:
+        cli.progress.set_enabled(None)
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("[mi-displace]")]
+    if not shown:
+        assert lines == []
+        return
+    assert lines[0] == f"[mi-displace] loading {scene} ..."
+    assert lines[1] == "[mi-displace]   displaced 'rock': building ..."
+    import mitsuba as mi
+
+    stats = next(s.build_stats for s in mi.load_file(scene).shapes() if s.id() == "rock")
+    counts = f"{stats['faces']:,} faces, {stats['vertices']:,} vertices"
+    assert re.fullmatch(rf"\[mi-displace\]   displaced 'rock': building: \d+\.\d\d s "
+                        rf"\({counts}\)", lines[2]), lines[2]
+    assert re.fullmatch(rf"\[mi-displace\] loading {re.escape(scene)}: \d+\.\d\d s", lines[3])
+    assert lines[4].endswith("rendering s.xml ...") and re.search(r": \d+\.\d\d s$", lines[5])

@@ -1,5 +1,20 @@
-"""The XML scenes in scenes/: load in both modes and render finite, lit images; the
-tessellated references are converged in tessellation (DESIGN protocol item 3)."""
+"""The XML scenes in scenes/: reference and approximation agree as closely as the guides say,
+at a small resolution; the tessellated references are converged in tessellation (DESIGN
+protocol item 3).
+
+Agreement (issue 19 item 3).  Both sides are rendered by the GPU-style ``raster``
+integrator: the reference geometry under raster is the path-traced reference up to the
+path tracer's noise (DESIGN protocol item 4, checked here on ``displaced_sphere``, the
+consistency scene, against ``path`` itself), and raster is deterministic, so the FLIP
+between the two sides is the technique's error alone and needs no noise margin.  Each
+scene's bound is the error its guide documents for that scene, at 256² (:data:`BOUNDS`,
+with the sentence it comes from); the test runs at 64², where every scene measured below
+its documented figure.  Each bound is also shown to be tight enough to fail: the same
+approximation misregistered by one pixel must exceed it (except in :data:`COARSE`).
+
+The reference scene is also path traced (2 spp) to catch a plugin that renders under raster
+only; every image is finite and lit.
+"""
 from pathlib import Path
 
 import flip_evaluator as flip
@@ -8,16 +23,64 @@ import numpy as np
 import pytest
 
 from mi_displace.core.io import to_srgb
+from mi_displace.evaluate import metrics
 
 SCENES = sorted((Path(__file__).resolve().parents[1] / "scenes").glob("*.xml"))
-SIDES = {"reference": "path", "approximation": "raster"}
+RES = 64
+
+#: scene -> (FLIP bound, where the guide documents it).
+BOUNDS = {
+    "bake_bunny": (0.0145, "docs/bake.md, Rendering: FLIP 0.0145 (256², path reference)"),
+    "bump_vs_displaced": (0.121, "README showcase table: FLIP 0.121, Mitsuba's bumpmap vs true "
+                                 "displacement"),
+    "ddm_chains_spot": (0.0074, "docs/ddm.md, Images: ddm_chains_spot FLIP 0.0074"),
+    "ddm_genus1": (0.0082, "docs/ddm.md, UV charts: ddm_genus1 FLIP 0.0082 (clamp and drop)"),
+    "ddm_stone_wall": (0.0129, "docs/ddm.md, Images: ddm_stone_wall FLIP 0.0129 (maps are exact "
+                               "on the plane: the pipelines' agreement)"),
+    "ddm_teapot_morph": (0.014, "docs/ddm.md, trade-off over map_resolution: FLIP 0.014 at 128, "
+                                "this scene's map_resolution"),
+    "ddm_thorns_sphere": (0.048, "docs/ddm.md, Images: FLIP 0.048 at map_resolution 32"),
+    "vdm_spot": (0.033, "docs/vdm.md, Table 1 on Spot: VDM FLIP 0.0330 (raster vs raster)"),
+    "vdm_torus": (0.0767, "docs/vdm.md, bench: flip_vs_reference 0.0767 (raster 256², same "
+                          "integrator)"),
+}
+#: Scenes whose documented error is as large as a one-pixel misregistration's (bump mapping's
+#: missing relief, 0.121; measured at 64²: 0.091, shifted 0.100): there the bound only catches
+#: gross disagreement; the bump map's gradient sign is checked in
+#: tests/plugins/test_height_textures.py.
+COARSE = {"bump_vs_displaced"}
+#: The consistency scene: same geometry on both sides, raster must match path (protocol item 4).
+CONSISTENCY = "displaced_sphere"
+
+#: Per-side parameters that keep the test fast, each within what the guides measured:
+#: tessellation 1024 (bricks) / 512 (cells on the torus) instead of 2048 changes the 64²
+#: reference by FLIP 0.015 / 0.0075 (measured; below each scene's margin to its bound),
+#: vdm_res 64 instead of 128 costs FLIP 0.0017 (docs/vdm.md, table sizes: 0.0784 vs 0.0767).
+FAST = {
+    "bump_vs_displaced": {"reference": {"resolution": 1024}},
+    "displaced_sphere": {"reference": {"resolution": 512}, "approximation": {"resolution": 512}},
+    "vdm_torus": {"reference": {"resolution": 512}, "approximation": {"vdm_res": 64}},
+    "vdm_spot": {"approximation": {"vdm_res": 64}},
+}
+PATH = {"type": "path", "max_depth": 2}
+
+
+def shoot(scene, spp, seed=0, integrator=None):
+    """Render a loaded scene to a finite (H, W, 3) NumPy image."""
+    img = np.array(mi.render(scene, spp=spp, seed=seed, integrator=integrator))[..., :3]
+    assert np.all(np.isfinite(img)), "non-finite pixels"
+    return img
 
 
 def render(path, spp, seed=0, **params):
-    scene = mi.load_file(str(path), **{k: str(v) for k, v in params.items()})
-    img = np.array(mi.render(scene, spp=spp, seed=seed))[..., :3]
-    assert np.all(np.isfinite(img)), f"{path.name}: non-finite pixels"
-    return img
+    return shoot(mi.load_file(str(path), **{k: str(v) for k, v in params.items()}), spp, seed)
+
+
+def load_side(path, mode, integrator="raster"):
+    """One side of a comparison scene at :data:`RES` with its fast parameters."""
+    params = {"res": RES, **FAST.get(path.stem, {}).get(mode, {})}
+    return mi.load_file(str(path), mode=mode, integrator=integrator,
+                        **{k: str(v) for k, v in params.items()})
 
 
 @pytest.fixture
@@ -36,16 +99,45 @@ def elsewhere(tmp_path, monkeypatch):
     mi.set_file_resolver(saved)
 
 
-@pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
-def test_scene_renders_both_sides(variant, path, elsewhere):
-    # `resolution` (tessellation) exists on the reference side only in some scenes
-    coarse = {"resolution": 64} if 'name="resolution"' in path.read_text() else {}
-    images = {mode: render(path, 4, mode=mode, integrator=integ, res=48,
-                           **(coarse if mode == "reference" else {}))
-              for mode, integ in SIDES.items()}
-    for mode, img in images.items():
-        assert img.mean() > 0.01, f"{path.name} ({mode}) is black"
-    assert abs(images["reference"].mean() / images["approximation"].mean() - 1) < 0.5
+def misregistered(image):
+    """The image moved by one pixel along both axes (a pixel-grid fault)."""
+    return np.roll(image, (1, 1), axis=(0, 1))
+
+
+def test_every_scene_has_a_documented_bound():
+    assert {p.stem for p in SCENES} == set(BOUNDS) | {CONSISTENCY}
+
+
+@pytest.mark.parametrize("path", [p for p in SCENES if p.stem != CONSISTENCY], ids=lambda p: p.stem)
+def test_approximation_agrees_with_reference_as_documented(variant, path, elsewhere):
+    bound, source = BOUNDS[path.stem]
+    reference_scene = load_side(path, "reference")
+    reference = shoot(reference_scene, 1)
+    traced = shoot(reference_scene, 2, integrator=mi.load_dict(PATH))  # renders under path too
+    del reference_scene
+    approximation = shoot(load_side(path, "approximation"), 1)
+    for what, img in (("reference", reference), ("path-traced reference", traced),
+                      ("approximation", approximation)):
+        assert img.mean() > 0.01, f"{path.name}: {what} is black"
+    error = metrics.flip(reference, approximation)[0]
+    assert error <= bound, f"{path.stem}: FLIP {error:.4f} above the documented {bound} ({source})"
+    # the bound can fail: a one-pixel misregistration of the same image exceeds it
+    shifted = metrics.flip(reference, misregistered(approximation))[0]
+    assert (shifted > bound) != (path.stem in COARSE), (shifted, bound)
+
+
+def test_consistency_scene_raster_matches_path_within_noise(variant, elsewhere):
+    """DESIGN protocol item 4 on the same geometry: FLIP(path, raster) <= path's noise floor
+    (FLIP between two seeds), as the README's first showcase row documents."""
+    path = next(p for p in SCENES if p.stem == CONSISTENCY)
+    reference_scene = load_side(path, "reference", "path")
+    a, b = (shoot(reference_scene, 16, seed=s) for s in (0, 1))
+    del reference_scene
+    raster = shoot(load_side(path, "approximation"), 1)
+    noise_floor = metrics.flip(a, b)[0]
+    error = metrics.flip(0.5 * (a + b), raster)[0]
+    assert 0 < error <= noise_floor, (error, noise_floor)
+    assert metrics.flip(0.5 * (a + b), misregistered(raster))[0] > noise_floor
 
 
 @pytest.mark.slow

@@ -12,6 +12,8 @@ import argparse
 import json
 import warnings
 
+from mi_displace.core.progress import stage
+
 
 def _positive_float(text: str) -> float:
     try:
@@ -69,7 +71,7 @@ def _cmd_bake(args) -> int:
     from mi_displace.bake.formats import DEFAULT_FORMATS
 
     fmts = DEFAULT_FORMATS if args.formats is None else [f.strip() for f in args.formats.split(",")]
-    with warnings.catch_warnings(record=True) as caught:
+    with stage(f"baking {args.high} at {args.res}^2"), warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = bake(args.high, args.low, res=args.res, out_dir=args.out, aa=args.aa,
                       max_distance=args.max_distance, pad=args.padding, map_formats=fmts,
@@ -96,7 +98,8 @@ def _cmd_restore(args) -> int:
     if not str(args.out).lower().endswith((".ply", ".obj")):   # before any work
         raise ValueError(f"out: restored mesh must be .ply or .obj, got {str(args.out)!r}")
     low = args.low or low_for_map(args.map)
-    out = restore(low, args.map, levels=args.levels, split=args.split)
+    with stage(f"restoring {args.map}"):
+        out = restore(low, args.map, levels=args.levels, split=args.split)
     out.save(args.out)
     print(f"restored {len(out.faces)} triangles, {len(out.positions)} vertices in "
           f"{out.seconds:.3f} s; wrote {args.out}")

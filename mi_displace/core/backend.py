@@ -71,7 +71,8 @@ def init(variant: str | None = None) -> str:
     if variant.startswith("llvm"):
         check_llvm()
     elif variant.startswith("cuda") and not dr.has_backend(dr.JitBackend.CUDA):
-        raise RuntimeError(f"variant {variant!r} needs a CUDA GPU and driver; none was found")
+        raise ValueError(f"variant {variant!r} needs a CUDA GPU and driver; none was found "
+                         f"(use {DEFAULT_VARIANT} on the CPU)")
     mi.set_variant(variant)
     from mi_displace import plugins
 

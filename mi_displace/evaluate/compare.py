@@ -58,6 +58,7 @@ from __future__ import annotations
 import json
 import math
 import statistics
+import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -66,6 +67,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.core.io import to_srgb, write_exr
+from mi_displace.core.progress import stage
 from mi_displace.evaluate import metrics
 from mi_displace.render import scene as scenes
 
@@ -213,19 +215,136 @@ def write_panel(path: str | Path, reference, approximation, error_map, info: dic
     return path
 
 
-def _render_side(path, xml_params, mode, integrator, spp) -> tuple[dict, np.ndarray, float]:
-    """Load the scene for one side and render it once (seed 0): (timings, image, seconds).
+def _render_side(path, xml_params, mode, integrator, spp, edits=None) -> tuple[dict, np.ndarray, float]:
+    """Load the scene for one side, apply ``edits`` and render it once (seed 0).
 
-    The scene is released before returning, so consecutive calls never hold two scenes.
+    Returns ``(timings, image, seconds)``; ``timings["build_s"]`` includes the edits'
+    ``params.update()``.  The scene is released before returning, so consecutive calls never
+    hold two scenes.
     """
     scene, timings = scenes.load(path, **xml_params, mode=mode, integrator=integrator)
+    if edits:
+        start = time.perf_counter()
+        scenes.apply_edits(scene, edits)
+        timings["build_s"] += time.perf_counter() - start
     image, seconds = scenes.render(scene, spp=spp, seed=0)
     metrics.assert_finite(image, f"{mode} image of {path}")
     return timings, image, seconds
 
 
+def measure_approximation(scene_path, xml_params: dict, integrator: str, spp: int | None,
+                          warm_repeats: int = 3, mode: str = "approximation",
+                          edits: dict | None = None, progress: bool | None = False) -> dict:
+    """Step 1 of the protocol: the approximation rendered cold, then ``warm_repeats`` times.
+
+    Args:
+        scene_path: scene XML following the convention.
+        xml_params: XML parameters (not ``mode`` / ``integrator``).
+        integrator: the approximation's integrator plugin type.
+        spp: samples per pixel (``None``: the scene's).
+        warm_repeats: warm load + render rounds (the warm times are their medians).
+        mode: the ``$mode`` to render (``approximation``, or another part of the scene).
+        edits: ``mi.traverse`` parameters set after each load (see ``scene.apply_edits``).
+        progress: a line per stage (:mod:`mi_displace.core.progress`; ``None``: on a terminal).
+
+    Returns:
+        dict with ``image`` (linear float32 ``(H, W, 3)``, the last warm round),
+        ``time_cold_s``, ``build_cold_s``, ``render_cold_s``, ``time_warm_s`` (median of
+        build + render), ``build_s``, ``render_warm_s`` (medians) and ``build_stats``.
+    """
+    name = Path(scene_path).name
+    with stage(f"{name}: {mode} ({integrator}), cold", progress) as s:
+        cold, image, render_cold = _render_side(scene_path, xml_params, mode, integrator, spp,
+                                                edits)
+        s.note = f"build {cold['build_s']:.2f} s, render {render_cold:.2f} s"
+    builds, renders = [], []
+    with stage(f"{name}: {mode}, {warm_repeats} warm rounds", progress):
+        for _ in range(warm_repeats):
+            warm, image, seconds = _render_side(scene_path, xml_params, mode, integrator, spp,
+                                                edits)
+            builds.append(warm["build_s"])
+            renders.append(seconds)
+    return {
+        "image": image,
+        "time_cold_s": cold["build_s"] + render_cold,
+        "build_cold_s": cold["build_s"],
+        "render_cold_s": render_cold,
+        "time_warm_s": statistics.median(b + r for b, r in zip(builds, renders)),
+        "build_s": statistics.median(builds),
+        "render_warm_s": statistics.median(renders),
+        "build_stats": warm["shapes"],
+    }
+
+
+def converge_reference(scene_path, xml_params: dict, integrator: str, approximations: list,
+                       target_ratio: float = 0.2, max_spp: int = 1024,
+                       progress: bool | None = False) -> dict:
+    """Step 2 of the protocol: a reference converged against the given approximations.
+
+    Two independent images (seed streams 0 and 1) get as many new samples again each round
+    until ``noise_floor <= target_ratio * min_i FLIP(reference, approximations[i])`` or the
+    next round would pass ``max_spp`` samples in total (``spp_capped``).
+
+    Args:
+        scene_path, xml_params: as for :func:`measure_approximation`.
+        integrator: the reference's integrator plugin type.
+        approximations: linear ``(H, W, 3)`` images the reference must resolve (>= 1).
+        target_ratio, max_spp: see :func:`compare`.
+        progress: a line per stage (build, each round with its noise floor and FLIP) and bars
+            over long multi-pass renders (:mod:`mi_displace.core.progress`).
+
+    Returns:
+        dict with ``reference`` (the average of the two images), ``images`` (the two),
+        ``noise_floor_flip``, ``flips`` (FLIP of each approximation), ``error_maps``,
+        ``rounds``, ``spp`` (total samples per pixel), ``spp_capped``, ``build_s``,
+        ``build_cold_s``, ``render_s`` (every render of the final reference),
+        ``render_cold_s`` (a 1-spp warm-up), ``build_stats`` and ``scene`` (the loaded
+        reference scene, for further renders).
+    """
+    name = Path(scene_path).name
+    ref_params = dict(xml_params, mode="reference", integrator=integrator)
+    with stage(f"{name}: reference ({integrator}), cold and warm build", progress):
+        ref_scene, ref_cold = scenes.load(scene_path, **ref_params)
+        del ref_scene
+        ref_scene, ref_warm = scenes.load(scene_path, **ref_params)
+        _, render_cold = scenes.render(ref_scene, spp=1, seed=2**31)
+    per_seed = max(1, min(ref_warm["spp"], max_spp // 2))
+    images, count, rounds, render_s, spp_capped = [None, None], 0, [], 0.0, False
+    while True:
+        new = per_seed if count == 0 else count
+        with stage(f"{name}: reference round {len(rounds) + 1}, {2 * (count + new)} spp",
+                   progress) as s:
+            for side in (0, 1):
+                image, seconds = scenes.render(
+                    ref_scene, spp=new, seed=2 * len(rounds) + side, progress=progress)
+                metrics.assert_finite(image, f"reference image of {scene_path}")
+                render_s += seconds
+                images[side] = image if count == 0 else (images[side] * count + image * new) / (count + new)
+            count += new
+            reference = 0.5 * (images[0] + images[1])
+            noise_floor, _ = metrics.flip(images[0], images[1])
+            results = [metrics.flip(reference, a) for a in approximations]
+            flips = [f for f, _ in results]
+            s.note = f"noise floor {noise_floor:.4f}, FLIP {min(flips):.4f}"
+        rounds.append({"spp": 2 * count, "noise_floor_flip": noise_floor,
+                       "flip_mean": min(flips)})
+        if noise_floor <= target_ratio * min(flips):
+            break
+        if 4 * count > max_spp:
+            spp_capped = True
+            break
+    return {
+        "reference": reference, "images": images, "noise_floor_flip": noise_floor,
+        "flips": flips, "error_maps": [m for _, m in results], "rounds": rounds,
+        "spp": 2 * count, "spp_capped": spp_capped, "build_s": ref_warm["build_s"],
+        "build_cold_s": ref_cold["build_s"], "render_s": render_s,
+        "render_cold_s": render_cold, "build_stats": ref_warm["shapes"], "scene": ref_scene,
+    }
+
+
 def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024,
-            target_ratio: float = 0.2, warm_repeats: int = 3, progress: bool = False) -> dict:
+            target_ratio: float = 0.2, warm_repeats: int = 3,
+            progress: bool | None = False) -> dict:
     """Run the comparison protocol (module docstring) on one scene and write its outputs.
 
     Args:
@@ -235,7 +354,9 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
         max_spp: most samples per pixel of the averaged reference image (>= 2).
         target_ratio: required ``noise_floor_flip / flip_mean`` (0 < ratio <= 1).
         warm_repeats: warm load + render rounds of the approximation (>= 3).
-        progress: progress bars for long reference renders.
+        progress: a line per stage with its time (approximation rounds, reference build,
+            each reference round with its noise floor and FLIP) and bars over long
+            multi-pass renders; ``None``: only on a terminal (:mod:`mi_displace.core.progress`).
 
     Returns:
         The metrics dict also written to ``out_dir/metrics.json`` (keys: :data:`METRIC_KEYS`).
@@ -256,48 +377,21 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
 
     # 1. approximation: cold, then warm rounds
     approx_int, approx_spp = settings["approximation_integrator"], settings["approximation_spp"]
-    cold, approx, approx_render_cold = _render_side(
-        scene_path, xml_params, "approximation", approx_int, approx_spp)
-    warm_builds, warm_renders = [], []
-    for _ in range(warm_repeats):
-        warm, approx, seconds = _render_side(
-            scene_path, xml_params, "approximation", approx_int, approx_spp)
-        warm_builds.append(warm["build_s"])
-        warm_renders.append(seconds)
-    approx_build_stats = warm["shapes"]
+    measured = measure_approximation(scene_path, xml_params, approx_int, approx_spp, warm_repeats,
+                                     progress=progress)
+    approx = measured["image"]
 
     # 2. reference: cold build (discarded), warm build, warm-up render, converging renders
     ref_int = settings["reference_integrator"]
-    ref_params = dict(xml_params, mode="reference", integrator=ref_int)
-    ref_scene, ref_cold = scenes.load(scene_path, **ref_params)
-    del ref_scene
-    ref_scene, ref_warm = scenes.load(scene_path, **ref_params)
-    _, reference_render_cold = scenes.render(ref_scene, spp=1, seed=2**31)
-    per_seed = max(1, min(ref_warm["spp"], max_spp // 2))
-    images, count, rounds, render_s, spp_capped = [None, None], 0, [], 0.0, False
-    while True:
-        new = per_seed if count == 0 else count
-        for side in (0, 1):
-            image, seconds = scenes.render(
-                ref_scene, spp=new, seed=2 * len(rounds) + side, progress=progress)
-            metrics.assert_finite(image, f"reference image of {scene_path}")
-            render_s += seconds
-            images[side] = image if count == 0 else (images[side] * count + image * new) / (count + new)
-        count += new
-        reference = 0.5 * (images[0] + images[1])
-        noise_floor, _ = metrics.flip(images[0], images[1])
-        flip_mean, error_map = metrics.flip(reference, approx)
-        rounds.append({"spp": 2 * count, "noise_floor_flip": noise_floor, "flip_mean": flip_mean})
-        if noise_floor <= target_ratio * flip_mean:
-            break
-        if 4 * count > max_spp:
-            spp_capped = True
-            break
+    ref = converge_reference(scene_path, xml_params, ref_int, [approx], target_ratio, max_spp,
+                             progress)
+    del ref["scene"]
+    reference, noise_floor, flip_mean = ref["reference"], ref["noise_floor_flip"], ref["flips"][0]
+    error_map = ref["error_maps"][0]
     width, height = reference.shape[1], reference.shape[0]
 
     # 3. metrics and outputs
-    reference_time = ref_warm["build_s"] + render_s
-    approx_warm = statistics.median(b + r for b, r in zip(warm_builds, warm_renders))
+    reference_time = ref["build_s"] + ref["render_s"]
     info = {
         "scene": str(scene_path.resolve()),
         "params": scenes.check_params(params),
@@ -312,27 +406,27 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
         "target_ratio": float(target_ratio),
         "converged": noise_floor <= target_ratio * flip_mean,
         "within_noise_floor": flip_mean <= noise_floor,
-        "reference_spp": 2 * count,
+        "reference_spp": ref["spp"],
         "max_spp": int(max_spp),
-        "spp_capped": spp_capped,
-        "reference_rounds": rounds,
+        "spp_capped": ref["spp_capped"],
+        "reference_rounds": ref["rounds"],
         "reference_integrator": ref_int,
         "approximation_integrator": approx_int,
         "approximation_spp": approx_spp,
         "reference_time_s": reference_time,
-        "reference_build_s": ref_warm["build_s"],
-        "reference_render_s": render_s,
-        "reference_build_cold_s": ref_cold["build_s"],
-        "reference_render_cold_s": reference_render_cold,
-        "approx_time_cold_s": cold["build_s"] + approx_render_cold,
-        "approx_build_cold_s": cold["build_s"],
-        "approx_render_cold_s": approx_render_cold,
-        "approx_time_warm_s": approx_warm,
-        "approx_build_s": statistics.median(warm_builds),
-        "approx_render_warm_s": statistics.median(warm_renders),
+        "reference_build_s": ref["build_s"],
+        "reference_render_s": ref["render_s"],
+        "reference_build_cold_s": ref["build_cold_s"],
+        "reference_render_cold_s": ref["render_cold_s"],
+        "approx_time_cold_s": measured["time_cold_s"],
+        "approx_build_cold_s": measured["build_cold_s"],
+        "approx_render_cold_s": measured["render_cold_s"],
+        "approx_time_warm_s": measured["time_warm_s"],
+        "approx_build_s": measured["build_s"],
+        "approx_render_warm_s": measured["render_warm_s"],
         "warm_repeats": int(warm_repeats),
-        "speedup": reference_time / approx_warm,
-        "build_stats": {"reference": ref_warm["shapes"], "approximation": approx_build_stats},
+        "speedup": reference_time / measured["time_warm_s"],
+        "build_stats": {"reference": ref["build_stats"], "approximation": measured["build_stats"]},
         "mitsuba_version": mi.__version__,
         "drjit_version": dr.__version__,
     }
@@ -342,3 +436,29 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
     with open(out_dir / "metrics.json", "w") as f:
         json.dump(_finite_or_none(info), f, indent=2, allow_nan=False)
     return info
+
+
+def compare_job(scene_path: str, params: dict | None = None, **options) -> dict:
+    """:func:`compare` as an independent job (:func:`mi_displace.evaluate.jobs.run_jobs`).
+
+    The worker writes into a temporary folder of its own and returns the files' bytes, so a
+    worker on another machine needs no shared file system; :func:`write_job_files` writes
+    them on the caller's side.
+
+    Returns:
+        ``{"info": metrics dict, "files": {name: bytes}}``.
+    """
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="mi_displace_compare_") as tmp:
+        info = compare(scene_path, tmp, params=params, **options)
+        files = {p.name: p.read_bytes() for p in Path(tmp).iterdir() if p.is_file()}
+    return {"info": _finite_or_none(info), "files": files}
+
+
+def write_job_files(out_dir, files: dict) -> None:
+    """Write the ``{name: bytes}`` returned by :func:`compare_job` into ``out_dir``."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for name, data in files.items():
+        (out_dir / Path(name).name).write_bytes(data)

@@ -26,12 +26,33 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.core.progress import bar as progress_bar
+
 #: Largest number of samples (pixels x spp) rendered in one ``mi.render`` call; larger
 #: requests are split into passes with distinct seeds and averaged.
 MAX_SAMPLES_PER_PASS = 1 << 24
 
 _PY_ERROR = re.compile(r"\n(ValueError|FileNotFoundError): (.*)\Z", re.S)
 _PY_TRACEBACK = "Traceback (most recent call last):"
+_XML_POSITION = re.compile(r"Error while loading (.+?) \(line (\d+), col (\d+)\):")
+
+
+def _name_xml_property(where: str) -> str:
+    """Add the property name to Mitsuba's XML value errors, which give only line and column
+    (``... (line 8, col 66): could not parse floating point value "big"``)."""
+    match = _XML_POSITION.search(where)
+    if not match:
+        return where
+    try:
+        line = Path(match.group(1)).read_text(errors="replace").splitlines()[int(match.group(2)) - 1]
+    except (OSError, IndexError):
+        return where
+    start = line.rfind("<", 0, int(match.group(3)))  # the column is the element's "<"
+    tag = line[start:line.find(">", start) + 1] if start >= 0 else ""
+    name = re.search(r'\bname\s*=\s*"([^"]*)"', tag)
+    if not name:
+        return where
+    return f"{where[:match.end()]} {tag.split()[0][1:]} {name.group(1)!r}:{where[match.end():]}"
 
 
 def _translate_load_error(path: Path, error: RuntimeError) -> Exception:
@@ -39,6 +60,7 @@ def _translate_load_error(path: Path, error: RuntimeError) -> Exception:
     message = str(error)
     where = re.sub(r"^\[[\w.]+:\d+\]\s*", "", message.split(_PY_TRACEBACK)[0])
     where = " ".join(where.split())
+    where = _name_xml_property(where)
     match = _PY_ERROR.search(message)
     if match:  # a Python plugin raised ValueError / FileNotFoundError: keep its type
         kind = FileNotFoundError if match.group(1) == "FileNotFoundError" else ValueError
@@ -46,6 +68,17 @@ def _translate_load_error(path: Path, error: RuntimeError) -> Exception:
     if _PY_TRACEBACK in message:  # any other Python exception in a plugin is a bug
         return error
     return ValueError(f"scene {str(path)!r}: {where}")
+
+
+def _user_error_inside(error: RuntimeError) -> Exception:
+    """The ``ValueError`` / ``FileNotFoundError`` that a plugin raised while ``mi.render``
+    traced it (Dr.Jit wraps it in a ``RuntimeError``), else ``error`` itself (a bug)."""
+    cause = error
+    while cause is not None:
+        if isinstance(cause, (ValueError, FileNotFoundError)):
+            return cause
+        cause = cause.__cause__ or cause.__context__
+    return error
 
 
 def check_params(params: dict | None, what: str = "params") -> dict[str, str]:
@@ -88,7 +121,8 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
 
     Raises:
         FileNotFoundError: ``path`` does not exist.
-        ValueError: Mitsuba rejects the scene or a parameter (message names the file).
+        ValueError: Mitsuba rejects the scene or a parameter (message names the file), or
+            the scene has no integrator or no sensor.
     """
     path = Path(path)
     if not path.is_file():
@@ -113,6 +147,10 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
             fit(scene)
     dr.sync_thread()
     build_s = time.perf_counter() - start
+    for what, found in (("integrator", scene.integrator()), ("sensor", scene.sensors())):
+        if not found:
+            raise ValueError(f"scene {str(path)!r} has no <{what}>: add one (e.g. "
+                             f"<{what} type=\"{'path' if what == 'integrator' else 'perspective'}\"/>)")
     return scene, {"build_s": build_s, "spp": scene_spp(scene), "shapes": shape_stats(scene)}
 
 
@@ -135,12 +173,12 @@ def _pass_seed(seed: int, index: int) -> int:
 
 
 def render(scene, spp: int | None = None, seed: int = 0, sensor: int = 0,
-           progress: bool = False) -> tuple[np.ndarray, float]:
+           progress: bool | None = False) -> tuple[np.ndarray, float]:
     """Render a scene to a linear float32 ``(H, W, 3)`` NumPy image and time it.
 
     Requests of more than :data:`MAX_SAMPLES_PER_PASS` samples are split into passes of
     equal spp (distinct seeds derived from ``seed``) averaged with weights proportional to
-    their spp; ``progress`` shows a tqdm bar over the passes.
+    their spp; ``progress`` shows a bar over the passes (:func:`mi_displace.core.progress.bar`).
 
     Args:
         scene: a loaded ``mi.Scene``.
@@ -149,10 +187,15 @@ def render(scene, spp: int | None = None, seed: int = 0, sensor: int = 0,
         seed: seed of the sampler (pass 0 uses it unchanged: one pass equals
             ``mi.render(scene, spp=spp, seed=seed)``).
         sensor: sensor index.
-        progress: show a progress bar when there are several passes.
+        progress: show a progress bar when there are several passes (``None``: on a
+            terminal, see :mod:`mi_displace.core.progress`).
 
     Returns:
         ``(image, seconds)``: wall seconds of the whole render including the transfer to NumPy.
+
+    Raises:
+        ValueError, FileNotFoundError: bad arguments, or a plugin refused its input while
+            the render was traced (unwrapped from Dr.Jit's ``RuntimeError``).
     """
     if spp is not None and (not isinstance(spp, (int, np.integer)) or spp < 1):
         raise ValueError(f"spp: must be a positive integer, got {spp!r}")
@@ -165,21 +208,58 @@ def render(scene, spp: int | None = None, seed: int = 0, sensor: int = 0,
     per_pass = max(1, min(total, MAX_SAMPLES_PER_PASS // max(1, width * height)))
     passes = [per_pass] * (total // per_pass) + ([total % per_pass] if total % per_pass else [])
 
-    bar = None
-    if progress and len(passes) > 1:
-        from tqdm import tqdm
-
-        bar = tqdm(total=total, unit="spp", desc="render", leave=False)
+    bar = progress_bar(total, "render", "spp", enabled=progress if len(passes) > 1 else False)
     dr.sync_thread()
     start = time.perf_counter()
     image = None
     for index, count in enumerate(passes):
-        rendered = mi.render(scene, spp=count, seed=_pass_seed(int(seed), index), sensor=sensor)
+        try:
+            rendered = mi.render(scene, spp=count, seed=_pass_seed(int(seed), index), sensor=sensor)
+        except RuntimeError as e:
+            raise _user_error_inside(e) from None
         part = np.asarray(rendered, dtype=np.float32)[..., :3] * (count / total)
         image = part if image is None else image + part
-        if bar is not None:
-            bar.update(count)
+        bar.update(count)
     seconds = time.perf_counter() - start
-    if bar is not None:
-        bar.close()
+    bar.close()
     return np.ascontiguousarray(image, dtype=np.float32), seconds
+
+
+def apply_edits(scene, edits: dict) -> None:
+    """Set ``mi.traverse`` parameters of a loaded scene and update it.
+
+    Args:
+        scene: a loaded ``mi.Scene``.
+        edits: ``{"shape_id.param": value}``; values (numbers or their text) are converted to
+            the parameter's current type (a scalar Dr.Jit array, ``int``, ``float`` or ``bool``).
+
+    Raises:
+        ValueError: a key the scene does not have (closest keys named), or a value that cannot
+            be converted.
+    """
+    import difflib
+
+    params = mi.traverse(scene)
+    for key, value in edits.items():
+        if key not in params:
+            close = difflib.get_close_matches(key, list(params.keys()), n=3)
+            hint = f"; did you mean {', '.join(close)}?" if close else ""
+            raise ValueError(f"scene parameter {key!r} does not exist (mi.traverse){hint}")
+        current = params[key]
+        try:
+            number = float(value)
+            if isinstance(current, bool):
+                new = bool(number)
+            elif isinstance(current, int):
+                if number != int(number):
+                    raise ValueError
+                new = int(number)
+            elif isinstance(current, float):
+                new = number
+            else:
+                new = type(current)(number)
+        except (TypeError, ValueError):
+            raise ValueError(f"scene parameter {key!r}: cannot set {value!r} "
+                             f"(current value {current!r})") from None
+        params[key] = new
+    params.update()

@@ -20,6 +20,12 @@ CONSTANT_SCENE = """<scene version="3.0.0">
 </scene>"""
 
 
+# a lit sphere in front of the camera: every pass of a few spp gives a different noisy image
+NOISY_SHAPE = """<shape type="sphere"><point name="center" x="0" y="0" z="3"/>
+        <float name="radius" value="0.8"/></shape>
+    <emitter type="point"><point name="position" x="1" y="1" z="0"/><rgb name="intensity" value="5"/></emitter>"""
+
+
 def _write(tmp_path, shape="", name="scene.xml"):
     path = tmp_path / name
     path.write_text(CONSTANT_SCENE.format(shape=shape))
@@ -34,6 +40,21 @@ def test_render_in_uneven_passes_weights_them_by_spp(variant, tmp_path, monkeypa
     image, seconds = scenes.render(scene, spp=7, seed=5)
     assert image.shape == (6, 8, 3) and image.dtype == np.float32 and seconds > 0
     np.testing.assert_allclose(image, np.broadcast_to([0.25, 0.5, 0.75], image.shape), rtol=1e-6)
+
+
+def test_uneven_passes_of_a_noisy_image_are_weighted_by_their_spp(variant, tmp_path, monkeypatch):
+    """Passes of 2, 2, 2 and 1 spp: the result is sum_k (spp_k / 7) image_k, each image_k
+    rendered directly with its pass seed.  The passes differ (pixel noise), so an unweighted
+    mean of the passes (or one dropped pass) fails."""
+    scene, _ = scenes.load(_write(tmp_path, NOISY_SHAPE), spp=7)
+    monkeypatch.setattr(scenes, "MAX_SAMPLES_PER_PASS", 8 * 6 * 2)
+    image, _ = scenes.render(scene, spp=7, seed=5)
+    passes = [np.asarray(mi.render(scene, spp=count, seed=scenes._pass_seed(5, k)))[..., :3]
+              for k, count in enumerate((2, 2, 2, 1))]
+    weighted = sum(p * (count / 7) for p, count in zip(passes, (2, 2, 2, 1)))
+    np.testing.assert_allclose(image, weighted, rtol=1e-5, atol=1e-6)
+    unweighted = sum(passes) / 4
+    assert np.abs(unweighted - weighted).max() > 100 * np.abs(image - weighted).max() + 1e-3
 
 
 def test_pass_seeds_are_distinct():

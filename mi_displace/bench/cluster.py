@@ -1,0 +1,71 @@
+"""``mi-displace bench cluster``: one 24-point sweep run locally and on a local Dask cluster.
+
+The sweep is ``tests/data/tradeoff/bumpy_sphere.xml`` at 64x64: ``resolution`` (8 values)
+x ``ball.scale`` (3 values), each point its own job (cold + 3 warm rounds).  It runs once in
+this process and once on ``local:2`` (two single-threaded worker processes on this
+machine), each with an empty point cache, and reports both wall times, whether every
+point's FLIP agrees exactly (raster is deterministic), and the scheduling overhead per job:
+``(wall - worker start-up) * workers / jobs - mean job time on the workers``.  On a 2-core
+machine the cluster cannot be faster than the local run; the point is that the numbers are
+the same and what the machinery costs.
+"""
+from __future__ import annotations
+
+import json as json_mod
+import statistics
+import time
+from pathlib import Path
+
+SCENE = Path(__file__).resolve().parents[2] / "tests" / "data" / "tradeoff" / "bumpy_sphere.xml"
+KNOBS = ("resolution=6,8,12,16,24,32,48,64", "ball.scale=0.1,0.15,0.2")
+WORKERS = 2
+
+
+def _startup_s() -> float:
+    """Seconds to start and stop a local cluster of :data:`WORKERS` workers (no jobs)."""
+    from mi_displace.evaluate.jobs import _Cluster
+
+    start = time.perf_counter()
+    _Cluster(f"local:{WORKERS}").close()
+    return time.perf_counter() - start
+
+
+def run() -> dict:
+    """Both runs (module docstring); returns the JSON record."""
+    import numpy as np
+
+    from mi_displace.evaluate import compare as cmp
+    from mi_displace.evaluate import tradeoff as tr
+    from mi_displace.evaluate.jobs import run_jobs
+
+    knobs = [tr.parse_knob(k) for k in KNOBS]
+    settings = cmp.protocol_settings(SCENE, {"res": "64"})
+    jobs = [tr._point_job(SCENE, settings, point, knobs, 3) for point in tr.sweep_points(knobs)]
+    record = {"scene": SCENE.name, "knobs": list(KNOBS), "points": len(jobs), "workers": WORKERS}
+    outcomes = {}
+    for name, cluster in (("local", None), ("cluster", f"local:{WORKERS}")):
+        start = time.perf_counter()
+        outcomes[name] = run_jobs(tr.measure_point, jobs, cluster=cluster, progress=True,
+                                  desc=name)
+        record[f"{name}_wall_s"] = time.perf_counter() - start
+    local, remote = outcomes["local"], outcomes["cluster"]
+    record["all_ok"] = all(o["ok"] for o in local + remote)
+    record["identical_images"] = record["all_ok"] and all(
+        np.array_equal(a["value"]["image"], b["value"]["image"]) for a, b in zip(local, remote))
+    record["hosts"] = sorted({o["host"] for o in remote})
+    record["cluster_startup_s"] = _startup_s()
+    record["mean_job_s_local"] = statistics.mean(o["job_s"] for o in local)
+    record["mean_job_s_cluster"] = statistics.mean(o["job_s"] for o in remote)
+    record["overhead_per_job_s"] = ((record["cluster_wall_s"] - record["cluster_startup_s"])
+                                    * WORKERS / len(jobs) - record["mean_job_s_cluster"])
+    return record
+
+
+def main(json: bool = False) -> int:
+    record = run()
+    if json:
+        print(json_mod.dumps(record, indent=2))
+    else:
+        for key, value in record.items():
+            print(f"{key}: {value}")
+    return 0

@@ -1,0 +1,174 @@
+"""Trade-off sweeps, tune and the atlas on a tiny displaced-sphere scene (32x32).
+
+The approximation is the same displaced sphere tessellated coarser (`resolution` knob) under
+`raster`; the reference is a 256 tessellation under `path`.  Independent truths: a finer
+tessellation is closer to the reference; the crossover of a power-law curve is known in
+closed form; the Pareto front is checked by brute force; a run on a two-worker local Dask
+cluster must give bit-identical raster images.
+"""
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mi_displace
+from mi_displace.evaluate import atlas as atlas_mod
+from mi_displace.evaluate import tradeoff as tr
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "tradeoff"
+SCENE = DATA / "bumpy_sphere.xml"
+SWEEP = dict(max_spp=128, warm_repeats=3)
+
+
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory):
+    """One local sweep of resolution = 6, 24, 96 (shared by the tests below)."""
+    mi_displace.init("llvm_ad_rgb")
+    root = tmp_path_factory.mktemp("sweep")
+    result = tr.tradeoff(SCENE, [tr.parse_knob("resolution=6,24,96")], out_dir=root / "out",
+                         cache_dir=root / "cache", **SWEEP)
+    return result, root
+
+
+def test_sweep_measures_every_point(sweep):
+    result, root = sweep
+    points = result["points"]
+    assert [p["label"] for p in points] == ["resolution=6", "resolution=24", "resolution=96"]
+    assert all(p["ok"] and not p["cached"] for p in points)
+    for p in points:
+        for key in ("flip", "relmse", "time_warm_s", "time_cold_s"):
+            assert math.isfinite(p[key]) and p[key] > 0, key
+    # a finer tessellation of the same displaced sphere is closer to the 256 reference
+    flips = [p["flip"] for p in points]
+    assert flips[0] > flips[1] > flips[2]
+    # the reference resolves the best point, or says it was capped
+    assert result["noise_floor_flip"] <= 0.2 * min(flips) or result["spp_capped"]
+    # the path curve: spp 1, 2, 4, ... up to max_spp / 4, error falling overall
+    curve = result["path_curve"]
+    assert [c["spp"] for c in curve] == [1, 2, 4, 8, 16, 32]
+    assert curve[-1]["flip"] < curve[0]["flip"]
+    out = root / "out"
+    saved = json.loads((out / "tradeoff.json").read_text())
+    assert [p["flip"] for p in saved["points"]] == pytest.approx(flips)
+    assert len((out / "tradeoff.csv").read_text().strip().splitlines()) == 1 + len(points)
+    for i in range(3):
+        assert (out / f"point_{i}.png").is_file()
+    assert (out / "tradeoff.png").stat().st_size > 10_000
+
+
+def test_pareto_front_brute_force(sweep):
+    points = sweep[0]["points"]
+    for p in points:
+        dominated = any(q["time_warm_s"] <= p["time_warm_s"] and q["flip"] <= p["flip"]
+                        and (q["time_warm_s"], q["flip"]) != (p["time_warm_s"], p["flip"])
+                        for q in points)
+        assert p["pareto"] == (not dominated)
+    assert tr.pareto_front([1, 2, 3, 4], [4, 1, 2, 0.5]) == [True, True, False, True]
+
+
+def test_crossover_power_law():
+    # flip = 1 / sqrt(spp), time = 0.5 + 0 * spp ... use time = spp / 100: log-log linear
+    curve = [{"spp": s, "time_s": s / 100, "flip": 1 / math.sqrt(s)} for s in (1, 2, 4, 8, 16, 32)]
+    seconds, spp = tr.crossover(curve, 1 / math.sqrt(10))
+    assert spp == pytest.approx(10, rel=1e-9) and seconds == pytest.approx(0.1, rel=1e-9)
+    assert tr.crossover(curve, 2.0) == (0.01, 1.0)        # reached at once
+    assert tr.crossover(curve, 0.01) == (None, None)      # not within the curve
+
+
+def test_cache_resumes_and_ignores_other_code(sweep, monkeypatch):
+    result, root = sweep
+    again = tr.tradeoff(SCENE, [tr.parse_knob("resolution=6,24,96")], cache_dir=root / "cache",
+                        **SWEEP)
+    assert all(p["cached"] for p in again["points"])
+    assert [p["flip"] for p in again["points"]] == [p["flip"] for p in result["points"]]
+    assert [p["time_warm_s"] for p in again["points"]] == [p["time_warm_s"] for p in result["points"]]
+    # a cache written by another code version is never read
+    monkeypatch.setattr("mi_displace.core.version.code_version", lambda: "0" * 16)
+    other = tr.tradeoff(SCENE, [tr.parse_knob("resolution=6")], cache_dir=root / "cache", **SWEEP)
+    assert not other["points"][0]["cached"]
+
+
+def test_invalid_value_is_skipped_and_recorded(variant_llvm, tmp_path):
+    result = tr.tradeoff(SCENE, [tr.parse_knob("resolution=0,12")], cache_dir=tmp_path, **SWEEP)
+    bad, good = result["points"]
+    assert not bad["ok"] and "resolution" in bad["error"]
+    assert good["ok"] and math.isfinite(good["flip"])
+
+
+def test_unknown_knob_refused_before_rendering(variant_llvm, monkeypatch, tmp_path):
+    def refuse(*args, **kwargs):
+        raise AssertionError("rendered although the knob is bad")
+
+    monkeypatch.setattr(tr.cmp, "converge_reference", refuse)
+    monkeypatch.setattr(tr.jobs_mod, "run_jobs", refuse)
+    with pytest.raises(ValueError, match="resolutio"):
+        tr.tradeoff(SCENE, [tr.parse_knob("resolutio=1,2")], cache_dir=tmp_path)
+    with pytest.raises(ValueError, match="bal.scale"):
+        tr.tradeoff(SCENE, [tr.parse_knob("bal.scale=0.1")], cache_dir=tmp_path)
+    for text in ("resolution", "resolution=", "=1,2", "resolution=1,1", "a b=1"):
+        with pytest.raises(ValueError, match="--knob"):
+            tr.parse_knob(text)
+    with pytest.raises(ValueError, match="cluster"):
+        tr.tradeoff(SCENE, [tr.parse_knob("resolution=8")], cache_dir=tmp_path, cluster="local:0")
+
+
+def test_traverse_knob(variant_llvm, tmp_path):
+    # ID.PARAM edits the loaded approximation: scale 0 is the bare sphere, far from the
+    # displaced reference; the reference's own scale (0.15) is closer
+    result = tr.tradeoff(SCENE, [tr.parse_knob("ball.scale=0,0.15")], cache_dir=tmp_path,
+                         max_spp=32)
+    flat, true = result["points"]
+    assert flat["ok"] and true["ok"] and flat["flip"] > true["flip"]
+
+
+def test_tune_picks_cheapest_within_budget(sweep, tmp_path):
+    result, root = sweep
+    points = result["points"]
+    budget = 0.5 * (points[1]["flip"] + points[0]["flip"])  # resolution 24 and 96 meet it
+    answer = tr.tune(SCENE, budget, [tr.parse_knob("resolution=6,24,96")], out_dir=tmp_path,
+                     cache_dir=root / "cache", **SWEEP)
+    meeting = [p for p in points if p["flip"] <= budget]
+    assert answer["chosen"] == min(meeting, key=lambda p: p["time_warm_s"])["point"]
+    assert answer["defines"] == [f"-D resolution={answer['chosen']['resolution']}"]
+    assert answer["meets_budget"] == (answer["verified_flip"] <= budget)
+    assert math.isfinite(answer["default_time_s"]) and answer["speedup_vs_default"] > 0
+    assert json.loads((tmp_path / "tune.json").read_text())["chosen"] == answer["chosen"]
+    none = tr.tune(SCENE, 1e-6, [tr.parse_knob("resolution=6")], cache_dir=root / "cache",
+                   **SWEEP)
+    assert none["chosen"] is None and none["defines"] == []
+
+
+def test_atlas_page(sweep, tmp_path):
+    result, root = sweep
+    scenes = tmp_path / "scenes"
+    shutil.copytree(DATA, scenes)
+    scene = scenes / "bumpy_sphere.xml"
+    scene.write_text(scene.read_text().replace("<!-- tradeoff:", "<!-- showcase -->\n<!-- tradeoff:"))
+    record = atlas_mod.atlas(tmp_path / "atlas", scenes_dir=scenes, cache_dir=root / "cache",
+                             max_spp=SWEEP["max_spp"])
+    assert list(record["scenes"]) == ["bumpy_sphere"] and not record["failures"]
+    page = (tmp_path / "atlas" / "index.html").read_text()
+    assert page.count("data:image/png;base64,") >= 1 + 3  # the plot and the point images
+    assert "Which setting for which budget" in page
+    rows = [r for r in record["budgets"] if r["setting"] is not None]
+    points = record["scenes"]["bumpy_sphere"]["points"]
+    for r in rows:  # the most accurate setting within the budget, by brute force
+        fits = [p for p in points if p["ok"] and p["time_warm_s"] <= r["budget_s"]]
+        assert r["flip"] == min(p["flip"] for p in fits)
+
+
+def test_cluster_matches_local(sweep, tmp_path):
+    """Two local worker processes: same images bit for bit (raster), hosts reported."""
+    result, root = sweep
+    remote = tr.tradeoff(SCENE, [tr.parse_knob("resolution=6,24,96")], out_dir=tmp_path / "out",
+                         cache_dir=tmp_path / "cache", cluster="local:2", **SWEEP)
+    assert not any(p["cached"] for p in remote["points"])
+    assert all(p["host"] for p in remote["points"])
+    for i in range(3):
+        local_png = (root / "out" / f"point_{i}.png").read_bytes()
+        assert (tmp_path / "out" / f"point_{i}.png").read_bytes() == local_png
+    assert [p["flip"] for p in remote["points"]] == pytest.approx(
+        [p["flip"] for p in result["points"]], abs=0.0)
