@@ -6,17 +6,14 @@ methods, and the image trade-off over ``map_resolution`` against the path tracer
   relative to the bounding-box diagonal, mean / max normal angle error [degrees].
 * :func:`normal_methods` — ``tangent`` / ``naive`` against ``jacobian`` on ``exact``;
   :func:`epsilon_sweep` — the tangent points' ε against the same truth.
-* :func:`image_sweep` — a comparison scene's reference (``exact``, ``path``) once, then
-  the approximation (``maps``, ``raster``) at each resolution: FLIP and warm wall time,
-  beside the reference's own FLIP against spp and time.
+* the image sweep over ``map_resolution`` is :func:`mi_displace.evaluate.tradeoff.tradeoff`
+  on the comparison scene (FLIP and warm time per resolution, the path tracer's own curve).
 * :func:`write_figures` writes the tables (JSON, Markdown) and plots under
   ``docs/figures/ddm_*``; ``mi-displace ddm-figures`` runs it.
 """
 from __future__ import annotations
 
 import json
-import statistics
-import time
 from pathlib import Path
 
 import drjit as dr
@@ -26,6 +23,7 @@ import numpy as np
 from mi_displace.ddm import base_maps, mapping
 from mi_displace.ddm import normals as nrm
 from mi_displace.ddm.model import DDMConfig, DDMModel
+from mi_displace.evaluate import tradeoff
 
 RESOLUTIONS = (32, 64, 128, 256, 512, 1024)
 #: the thorns-on-sphere set-up of scenes/ddm_thorns_sphere.xml
@@ -151,53 +149,6 @@ def epsilon_sweep(cfg: DDMConfig, epsilons=(1e-5, 1e-4, 1e-3, 1e-2, 1e-1)) -> li
     return rows
 
 
-def _timed(fn, repeats: int = 3):
-    fn()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - start)
-    return out, statistics.median(times)
-
-
-def image_sweep(scene_path, resolutions=(16, 32, 64, 128, 256, 512), reference_spp: int = 1024,
-                path_spp=(4, 16, 64, 256)) -> dict:
-    """FLIP and time of the approximation per ``map_resolution`` and of ``path`` per spp.
-
-    The reference is ``mode=reference, integrator=path`` at ``reference_spp`` (two seeds
-    averaged); the path curve renders the same reference scene at lower spp (seed 7).
-    """
-    from mi_displace.evaluate import metrics
-    from mi_displace.render import scene as scenes
-
-    ref_scene, ref_t = scenes.load(scene_path, mode="reference", integrator="path")
-    half = reference_spp // 2
-    a, ta = scenes.render(ref_scene, spp=half, seed=0)
-    b, tb = scenes.render(ref_scene, spp=half, seed=1)
-    reference = 0.5 * (a + b)
-    noise_floor, _ = metrics.flip(a, b)
-    path_rows = []
-    for spp in path_spp:
-        img, seconds = scenes.render(ref_scene, spp=spp, seed=7)
-        path_rows.append({"spp": spp, "flip": metrics.flip(reference, img)[0],
-                          "time_s": ref_t["build_s"] + seconds})
-    del ref_scene
-    rows = []
-    for r in resolutions:
-        def once():
-            sc, t = scenes.load(scene_path, mode="approximation", integrator="raster",
-                                map_resolution=r)
-            img, seconds = scenes.render(sc)
-            return img, t["build_s"] + seconds
-
-        (img, _), wall = _timed(once)
-        metrics.assert_finite(img, f"approximation at map_resolution {r}")
-        rows.append({"map_resolution": r, "flip": metrics.flip(reference, img)[0], "time_s": wall})
-    return {"scene": str(scene_path), "reference_spp": reference_spp, "noise_floor_flip": noise_floor,
-            "reference_time_s": ref_t["build_s"] + ta + tb, "approximation": rows, "path": path_rows}
-
-
 def _plot_accuracy(rows: list[dict], path: Path) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -217,28 +168,6 @@ def _plot_accuracy(rows: list[dict], path: Path) -> None:
     ax2.set_ylabel("normal angle error (deg)")
     ax2.legend()
     fig.suptitle("HDDM maps vs exact DDM (thorns on a sphere)", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-
-
-def _plot_sweep(sweep: dict, path: Path) -> None:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(5, 3.6))
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot(1, 1, 1)
-    a, p = sweep["approximation"], sweep["path"]
-    ax.loglog([x["time_s"] for x in a], [x["flip"] for x in a], "o-", label="HDDM maps + raster")
-    for x in a:
-        ax.annotate(str(x["map_resolution"]), (x["time_s"], x["flip"]), fontsize=7)
-    ax.loglog([x["time_s"] for x in p], [x["flip"] for x in p], "s--", label="path (exact), by spp")
-    for x in p:
-        ax.annotate(f"{x['spp']} spp", (x["time_s"], x["flip"]), fontsize=7)
-    ax.axhline(sweep["noise_floor_flip"], color="grey", lw=0.8, label="reference noise floor")
-    ax.set_xlabel("wall time, build + render (s)")
-    ax.set_ylabel("FLIP against the reference")
-    ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 
@@ -278,8 +207,8 @@ def plot_geometry_images(path: Path, resolution: int = 256) -> dict:
 
 def _markdown(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
     head = "| " + " | ".join(c[0] for c in columns) + " |\n|" + "---|" * len(columns) + "\n"
-    return head + "".join("| " + " | ".join(format(r[c[1]], c[2]) for c in columns) + " |\n"
-                          for r in rows)
+    return head + "".join("| " + " | ".join("–" if r[c[1]] is None else format(r[c[1]], c[2])
+                                            for c in columns) + " |\n" for r in rows)
 
 
 def write_figures(out_dir, scene_path, quick: bool = False) -> dict:
@@ -290,10 +219,10 @@ def write_figures(out_dir, scene_path, quick: bool = False) -> dict:
     acc = geometric_accuracy(DDMConfig(**THORNS_SPHERE), res)
     methods = normal_methods(DDMConfig(**THORNS_SPHERE))
     eps = epsilon_sweep(DDMConfig(**THORNS_SPHERE))
-    sweep = image_sweep(scene_path, resolutions=(16, 32, 64) if quick else (16, 32, 64, 128, 256, 512),
-                        reference_spp=64 if quick else 1024, path_spp=(4, 16) if quick else (4, 16, 64, 256))
+    knob = tradeoff.parse_knob("map_resolution=" + ("16,32,64" if quick else "16,32,64,128,256,512"))
+    sweep = tradeoff.tradeoff(scene_path, [knob], max_spp=64 if quick else 1024)
     _plot_accuracy(acc, out / "ddm_accuracy.png")
-    _plot_sweep(sweep, out / "ddm_sweep.png")
+    tradeoff.plot(sweep, out / "ddm_sweep.png")
     plot_geometry_images(out / "ddm_maps.png")
     record = {"accuracy": acc, "normal_methods": methods, "epsilon": eps, "sweep": sweep,
               "variant": mi.variant()}
@@ -310,10 +239,12 @@ def write_figures(out_dir, scene_path, quick: bool = False) -> dict:
                           ("exact max (deg)", "exact_max_deg", ".3g"),
                           ("maps mean (deg)", "maps_mean_deg", ".3g"),
                           ("maps max (deg)", "maps_max_deg", ".3g")])
-        + "\n## image sweep\n\n" + _markdown(sweep["approximation"], [
-            ("map_resolution", "map_resolution", "d"), ("FLIP", "flip", ".4f"),
-            ("time (s)", "time_s", ".3f")])
-        + "\npath reference by spp:\n\n" + _markdown(sweep["path"], [
+        + "\n## image sweep (mi-displace tradeoff)\n\n" + _markdown(
+            [{**r["point"], **r} for r in sweep["points"] if r["ok"]], [
+                ("map_resolution", "map_resolution", "s"), ("FLIP", "flip", ".4f"),
+                ("warm time (s)", "time_warm_s", ".3f"),
+                ("path needs (s)", "path_crossover_s", ".3g")])
+        + "\npath reference by spp:\n\n" + _markdown(sweep["path_curve"], [
             ("spp", "spp", "d"), ("FLIP", "flip", ".4f"), ("time (s)", "time_s", ".3f")]))
     (out / "ddm_figures.md").write_text(md)
     dr.sync_thread()
