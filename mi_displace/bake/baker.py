@@ -30,8 +30,8 @@ import numpy as np
 
 from mi_displace.bake import diagnostics as diag
 from mi_displace.bake import formats, padding, unwrap
-from mi_displace.bake.meshdata import (MeshData, check_mesh, load_mesh, save_obj, tangent_frame,
-                                       uv_triangle_stats)
+from mi_displace.bake.meshdata import MeshData, check_mesh, load_mesh, save_obj, uv_triangle_stats
+from mi_displace.bake.mikktspace import mikktspace
 from mi_displace.bake.trace import AMBIGUOUS, EMPTY, HighPoly, LowPolyDevice, OK, trace
 from mi_displace.bake.uv_raster import (OVERLAP_RESOLUTION, UVLayout, overlap_texels,
                                         rasterize_rows)
@@ -138,7 +138,7 @@ class Baker:
 
     def __init__(self, high: MeshData, low: MeshData, cage=None, cage_offset: float | None = None):
         normals = low.normals()
-        tangents, signs = tangent_frame(low.positions, low.faces, low.uvs, normals)
+        tangents, signs = mikktspace(low.positions, low.faces, normals, low.uvs)
         cage_pos = None
         if cage is not None:
             cage = cage if isinstance(cage, MeshData) else load_mesh(cage, "cage")

@@ -23,7 +23,7 @@ format (file)             pixel   channels
 ``d16_n16`` (.png)        RGBA 8  R,G displacement high, low byte; B,A normal x,y
 ``float`` (.exr)          float   D displacement, NX NY NZ normal, DX DY DZ direction,
                                   B back depth (all float32, ZIP)
-``normal_tangent`` (.png) RGB 8   tangent-space normal map (MikkTSpace-equivalent frame)
+``normal_tangent`` (.png) RGB 8   tangent-space normal map (MikkTSpace frame)
 ``normal_object`` (.png)  RGB 8   object-space normal map
 ========================  ======  =====================================================
 """
@@ -42,9 +42,9 @@ FORMATS = {
 }
 DEFAULT_FORMATS = tuple(FORMATS)
 UV_CONVENTION = "texel (c, r) centre at u = (c + 0.5) / W, v = 1 - (r + 0.5) / H (v up, row 0 on top)"
-TANGENT_CONVENTION = ("MikkTSpace-equivalent: vertex tangents from UV gradients, angle-weighted, "
-                      "orthogonalised to the vertex normal; bitangent = sign * cross(n, t) per pixel "
-                      "from the interpolated, unnormalised n and t; normal = normalize(x t + y b + z n)")
+TANGENT_CONVENTION = ("MikkTSpace (genTangSpaceDefault) over the vertex normals written in low.obj; "
+                      "bitangent = sign * cross(n, t) per pixel from the interpolated, unnormalised "
+                      "n and t; normal = normalize(x t + y b + z n)")
 
 
 def check_formats(formats) -> tuple[str, ...]:

@@ -28,7 +28,8 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.bake import formats
-from mi_displace.bake.meshdata import MeshData, load_mesh, save_obj, tangent_frame, weld_ids
+from mi_displace.bake.meshdata import MeshData, load_mesh, save_obj, weld_ids
+from mi_displace.bake.mikktspace import mikktspace, vertex_tangents
 from mi_displace.core.tessellate import (MAX_VERTICES, face_weighted_normals, gather,
                                          scatter_add, subdivision_topology)
 
@@ -137,7 +138,8 @@ def restore(low, displacement_map, levels: int | None = 2, split: int | None = N
     d = _texture(disp).eval(lookup)[0]
     direction = n
     if dirs is not None:
-        t_v, s_v = tangent_frame(low.positions, low.faces, low.uvs, normals)
+        t_v, s_v = vertex_tangents(low.faces, *mikktspace(low.positions, low.faces, normals, low.uvs),
+                                   len(low.positions))
         t = interp(mi.Vector3f, t_v)
         b = dr.sign(interp(mi.Vector2f, np.stack([s_v, s_v], 1)).x) * dr.cross(n_raw, t)
         x = _texture(dirs).eval(lookup)

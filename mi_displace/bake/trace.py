@@ -99,25 +99,28 @@ class LowPolyDevice:
 
     def __init__(self, low: MeshData, normals: np.ndarray, tangents: np.ndarray,
                  signs: np.ndarray, cage: np.ndarray | None = None):
+        """``tangents`` (F, 3, 3) and ``signs`` (F, 3): per face corner (MikkTSpace)."""
         self.faces = [mi.UInt32(low.faces[:, k].astype(np.uint32)) for k in range(3)]
         self.p = _vec(low.positions, mi.Point3f)
         self.n = _vec(normals)
-        self.t = _vec(tangents)
-        self.sign = mi.Float(np.asarray(signs, np.float32))
+        self.t = _vec(np.asarray(tangents, np.float32).reshape(-1, 3))
+        self.sign = mi.Float(np.asarray(signs, np.float32).ravel())
         self.cage = None if cage is None else _vec(cage, mi.Point3f)
 
     def interpolate(self, prim, b1, b2):
         """p, unnormalised n and t, per-pixel bitangent sign*(n x t) and the cage point q."""
         f = [dr.gather(mi.UInt32, self.faces[k], prim) for k in range(3)]
+        corner = [prim * 3 + k for k in range(3)]
         w = (1.0 - b1 - b2, b1, b2)
 
-        def lerp(cls, arr):
-            return sum((gather(cls, arr, f[k]) * w[k] for k in (1, 2)), gather(cls, arr, f[0]) * w[0])
+        def lerp(cls, arr, index):
+            return sum((gather(cls, arr, index[k]) * w[k] for k in (1, 2)), gather(cls, arr, index[0]) * w[0])
 
-        p, n, t = lerp(mi.Point3f, self.p), lerp(mi.Vector3f, self.n), lerp(mi.Vector3f, self.t)
-        s = dr.sign(sum((dr.gather(mi.Float, self.sign, f[k]) * w[k] for k in (1, 2)),
-                        dr.gather(mi.Float, self.sign, f[0]) * w[0]))
-        q = None if self.cage is None else lerp(mi.Point3f, self.cage)
+        p, n = lerp(mi.Point3f, self.p, f), lerp(mi.Vector3f, self.n, f)
+        t = lerp(mi.Vector3f, self.t, corner)
+        s = dr.sign(sum((dr.gather(mi.Float, self.sign, corner[k]) * w[k] for k in (1, 2)),
+                        dr.gather(mi.Float, self.sign, corner[0]) * w[0]))
+        q = None if self.cage is None else lerp(mi.Point3f, self.cage, f)
         return p, n, t, s * dr.cross(n, t), q
 
 
