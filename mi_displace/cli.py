@@ -83,11 +83,18 @@ def _seed(text: str) -> int:
     return value
 
 
+def _version() -> str:
+    from mi_displace import __version__
+
+    return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``mi-displace``."""
     parser = argparse.ArgumentParser(
         prog="mi-displace", description="Displacement mapping for Mitsuba 3: render, compare, benchmark.")
     parser.add_argument("--variant", help="Mitsuba variant (default: $MI_DISPLACE_VARIANT or llvm_ad_rgb)")
+    parser.add_argument("--version", action="version", version=f"mi-displace {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     def defines(p):

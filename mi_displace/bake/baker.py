@@ -16,6 +16,7 @@ Units: distances in the meshes' object units; resolutions in texels.
 """
 from __future__ import annotations
 
+import datetime
 import json
 import math
 import os
@@ -30,7 +31,8 @@ import numpy as np
 
 from mi_displace.bake import diagnostics as diag
 from mi_displace.bake import formats, padding, unwrap
-from mi_displace.bake.meshdata import MeshData, check_mesh, load_mesh, save_obj, uv_triangle_stats
+from mi_displace.bake.meshdata import (MeshData, check_mesh, edge_counts, load_mesh, save_obj,
+                                       uv_triangle_stats, weld_ids)
 from mi_displace.bake.mikktspace import mikktspace
 from mi_displace.bake.trace import AMBIGUOUS, EMPTY, HighPoly, LowPolyDevice, OK, trace
 from mi_displace.bake.uv_raster import (OVERLAP_RESOLUTION, UVLayout, overlap_texels,
@@ -40,8 +42,30 @@ CHUNK_SAMPLES = 1 << 20        # samples per block of rows (bounds device memory
 BYTES_PER_TEXEL = 160          # host: maps, status, padding transform and encoded copies
 BYTES_PER_SAMPLE = 240         # device: samples, rays, intersections, interpolated frame
 MAX_RESOLUTION = 16384
-DEFAULT_MAX_DISTANCE_REL = 0.1  # of the high-poly's bounding-box diagonal
+DISTANCE_MARGIN = 1.5           # default max_distance = margin x one-sided Hausdorff low -> high
+DISTANCE_FLOOR_REL = 0.005      # ... plus this fraction of the high-poly's diagonal
+DISTANCE_SAMPLES = 20_000       # low-poly surface samples of that Hausdorff distance
 DEFAULT_DELTA_REL = 1e-5
+
+
+def default_max_distance(high: MeshData, low: MeshData) -> tuple[float, dict]:
+    """The search distance derived from the pair: DISTANCE_MARGIN x the one-sided Hausdorff
+    distance of the low-poly to the high-poly (how far the high-poly strays from it, measured
+    on the low-poly's vertices and DISTANCE_SAMPLES area samples) + DISTANCE_FLOOR_REL of the
+    diagonal [object units].  A fixed fraction of the diagonal lets texels on thin parts reach
+    far surfaces; this stays as close as the pair allows."""
+    from trimesh.sample import sample_surface
+
+    from mi_displace.evaluate.metrics import point_mesh_distance
+
+    start = time.perf_counter()
+    points, _ = sample_surface(low.to_trimesh(), DISTANCE_SAMPLES, seed=0)
+    points = np.concatenate([points, low.positions.astype(np.float64)])
+    hausdorff = float(point_mesh_distance(points, high.to_trimesh()).max())
+    distance = DISTANCE_MARGIN * hausdorff + DISTANCE_FLOOR_REL * high.diagonal
+    return distance, {"rule": f"{DISTANCE_MARGIN} x one-sided Hausdorff low->high + "
+                              f"{DISTANCE_FLOOR_REL:g} x diagonal",
+                      "hausdorff_low_to_high": hausdorff, "seconds": time.perf_counter() - start}
 
 
 def available_memory() -> int:
@@ -142,12 +166,16 @@ class Baker:
         cage_pos = None
         if cage is not None:
             cage = cage if isinstance(cage, MeshData) else load_mesh(cage, "cage")
-            if cage.positions.shape != low.positions.shape or not np.array_equal(
-                    cage.faces, low.faces):
-                raise ValueError(f"cage: must have the low-poly's vertices and faces "
-                                 f"({len(low.positions)} vertices, {len(low.faces)} faces), got "
-                                 f"{len(cage.positions)} and {len(cage.faces)}")
-            cage_pos = cage.positions
+            # corresponding face corners (an OBJ reader may number the vertices differently)
+            cage_pos = np.zeros_like(low.positions)
+            if len(cage.faces) == len(low.faces):
+                cage_pos[low.faces] = cage.positions[cage.faces]
+            if len(cage.faces) != len(low.faces) or not np.array_equal(
+                    cage_pos[low.faces], cage.positions[cage.faces]):
+                raise ValueError(f"cage: must have the low-poly's faces, corner for corner "
+                                 f"({len(low.faces)} faces), got {len(cage.faces)} faces"
+                                 + (" that do not share the low-poly's vertices"
+                                    if len(cage.faces) == len(low.faces) else ""))
         elif cage_offset is not None:
             if not (math.isfinite(cage_offset) and cage_offset > 0):
                 raise ValueError(f"cage_offset: must be a positive distance, got {cage_offset!r}")
@@ -164,7 +192,7 @@ class Baker:
 
     def run(self, width: int, height: int, aa: int, max_distance: float, delta: float,
             dual_depth: bool, conservative: bool = True,
-            continuation: bool = False) -> tuple[np.ndarray, dict]:
+            continuation: bool = False, progress=None) -> tuple[np.ndarray, dict]:
         """Bake all texels.
 
         Returns:
@@ -179,6 +207,7 @@ class Baker:
         conservative_samples = 0
         tri_hit = dr.zeros(mi.UInt32, self.layout.face_count)
         rows = max(1, CHUNK_SAMPLES // (W * aa * aa))
+        start = time.perf_counter()
         for row0 in range(0, H, rows):  # blocks of rows (bounded memory), not per texel
             n_rows = min(rows, H - row0)
             s = rasterize_rows(self.layout, W, H, row0, n_rows, aa, conservative)
@@ -190,6 +219,8 @@ class Baker:
             r = trace(self.high_dev, self.low_dev, s.prim, s.b1, s.b2, max_distance, delta,
                       dual_depth, continuation)
             _texel_average(r, s.texel, n_rows * W, aa, max_distance, flat, row0 * W)
+            if progress is not None:
+                progress(f"  rows {row0 + n_rows}/{H} traced ({time.perf_counter() - start:.1f} s)")
         ores = min(max(width, height), OVERLAP_RESOLUTION)
         extra = {"uv_overlap_texels": overlap_texels(self.layout, ores),
                  "uv_overlap_resolution": ores, "conservative_samples": conservative_samples,
@@ -272,7 +303,8 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
          pad: float = 8, map_formats=formats.DEFAULT_FORMATS, diagnostics: bool = False,
          cage=None, cage_offset: float | None = None, target_faces: int = 5000,
          smoothing_iterations: int = 10, conservative: bool = True,
-         min_hit_fraction: float = 0.5, delta: float | None = None) -> BakeResult:
+         min_hit_fraction: float = 0.5, delta: float | None = None,
+         progress=None) -> BakeResult:
     """Bake maps of ``high`` over ``low`` (paths or :class:`MeshData`).
 
     Args:
@@ -283,8 +315,8 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
         res: map size in texels (int, or (width, height)).
         out_dir: folder for maps, sidecars, ``low.obj`` and ``bake.json`` (``None``: no files).
         aa: sub-samples per texel side (aa x aa regular grid; 1 = texel centre).
-        max_distance: largest |displacement| searched [object units]; default 10 % of the
-            high-poly's bounding-box diagonal.
+        max_distance: largest |displacement| searched [object units]; default derived from
+            the pair (:func:`default_max_distance`), recorded in ``bake.json``.
         pad: edge padding radius [texels]; texels that missed the high-poly are filled
             from their nearest hit texel within the same radius.
         map_formats: names from :data:`formats.FORMATS`.
@@ -295,21 +327,33 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
         min_hit_fraction: fewest covered texels that must find the high-poly; below it the
             low-poly is taken not to sit near the high-poly (ValueError, no empty map).
         delta: ray start offset [object units]; default 1e-5 of the diagonal.
+        progress: callable taking one line of text per stage (the CLI prints them); None: quiet.
     """
     t0 = time.perf_counter()
+    say = progress or (lambda line: None)
+    inputs = {k: None if v is None else v.name if isinstance(v, MeshData) else os.path.abspath(v)
+              for k, v in (("high", high), ("low", low), ("cage", cage))}
     map_formats = formats.check_formats(map_formats)
     width, height = check_settings(res, aa, max_distance, pad)
     high, low, timings = prepare_inputs(high, low, target_faces, smoothing_iterations)
-    max_distance = DEFAULT_MAX_DISTANCE_REL * high.diagonal if max_distance is None else float(max_distance)
+    say(f"inputs: high-poly {len(high.faces):,} faces, low-poly {len(low.faces):,} faces "
+        f"({time.perf_counter() - t0:.1f} s)")
+    if max_distance is None:
+        max_distance, distance_info = default_max_distance(high, low)
+        say(f"search distance {max_distance:.4g} ({distance_info['rule']}; Hausdorff "
+            f"{distance_info['hausdorff_low_to_high']:.4g}, {distance_info['seconds']:.1f} s)")
+    else:
+        max_distance, distance_info = float(max_distance), {"rule": "given"}
     delta = DEFAULT_DELTA_REL * high.diagonal if delta is None else float(delta)
     uv_stats = uv_triangle_stats(low.uvs, low.faces)
     start = time.perf_counter()
     baker = Baker(high, low, cage, cage_offset)
     dr.eval()
     timings["accel_s"] = time.perf_counter() - start
+    say(f"acceleration structures and MikkTSpace frame ({timings['accel_s']:.1f} s)")
     start = time.perf_counter()
     image, extra = baker.run(width, height, aa, max_distance, delta,
-                             "dual_d8_n16" in map_formats, conservative, diagnostics)
+                             "dual_d8_n16" in map_formats, conservative, diagnostics, say)
     timings["raster_trace_s"] = time.perf_counter() - start
     status = image[..., Baker.CHANNELS["status"][0]].astype(np.uint8)
     covered = status != EMPTY
@@ -326,6 +370,7 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
     maps["valid"] = valid
     maps["filled"] = filled     # texels holding a value (covered or padded): quantisation range
     timings["bake_s"] = timings["accel_s"] + timings["raster_trace_s"] + timings["padding_s"]
+    say(f"padding ({timings['padding_s']:.1f} s)")
     count = diag.counts(status)
     n_cov = int(covered.sum())
     hits = count["ok"] + count["ambiguous"]
@@ -338,12 +383,18 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
             f"low-poly does not sit near the high-poly: only {hits} of {n_cov} covered texels "
             f"reached it within max_distance={max_distance:.4g} (misses {count['miss']}, beyond "
             f"{count['beyond']}); align the meshes or raise max_distance")
+    from mi_displace import __version__
+
     record = {
+        "inputs": inputs,
+        "tool": {"mi_displace": __version__, "mitsuba": mi.__version__, "drjit": dr.__version__},
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "high": {"name": high.name, "vertices": len(high.positions), "faces": len(high.faces),
                  "diagonal": high.diagonal},
         "low": {"name": low.name, "vertices": len(low.positions), "faces": len(low.faces),
-                "notes": low.notes, **uv_stats},
+                "notes": low.notes, **uv_stats, **edge_counts(low.faces, weld_ids(low.positions))},
         "settings": {"width": width, "height": height, "aa": aa, "max_distance": max_distance,
+                     "max_distance_rule": distance_info,
                      "delta": delta, "padding": pad, "formats": list(map_formats),
                      "cage": None if cage is None else str(cage) if not isinstance(cage, MeshData) else cage.name,
                      "cage_offset": cage_offset, "conservative": conservative,
@@ -357,6 +408,7 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
     result = BakeResult(maps, status, covered, low, record)
     if out_dir is not None:
         write_outputs(result, Path(out_dir), map_formats, diagnostics)
+        say(f"wrote {len(record['files'])} files ({timings['write_s']:.1f} s)")
     timings["total_s"] = time.perf_counter() - t0
     if out_dir is not None:
         (Path(out_dir) / "bake.json").write_text(json.dumps(record, indent=2))

@@ -40,7 +40,9 @@ FORMATS = {
     "dual_d8_n16": ".png", "d16_n16": ".png", "float": ".exr",
     "normal_tangent": ".png", "normal_object": ".png",
 }
-DEFAULT_FORMATS = tuple(FORMATS)
+#: what a user asks for most: 16-bit displacement and the tangent-space normal map (the
+#: validity mask ``valid.png`` is always written); ``--formats all`` writes every format
+DEFAULT_FORMATS = ("d16", "normal_tangent")
 UV_CONVENTION = "texel (c, r) centre at u = (c + 0.5) / W, v = 1 - (r + 0.5) / H (v up, row 0 on top)"
 TANGENT_CONVENTION = ("MikkTSpace (genTangSpaceDefault) over the vertex normals written in low.obj; "
                       "bitangent = sign * cross(n, t) per pixel from the interpolated, unnormalised "
@@ -49,7 +51,7 @@ TANGENT_CONVENTION = ("MikkTSpace (genTangSpaceDefault) over the vertex normals 
 
 def check_formats(formats) -> tuple[str, ...]:
     """Validate a list of format names (ValueError naming the unknown ones)."""
-    formats = tuple(formats)
+    formats = tuple(FORMATS) if formats == "all" or tuple(formats) == ("all",) else tuple(formats)
     bad = [f for f in formats if f not in FORMATS]
     if bad or not formats:
         raise ValueError(f"formats: unknown {bad or 'empty list'}; choose from {', '.join(FORMATS)}")

@@ -104,21 +104,34 @@ def _lines(fmt: str, rows: np.ndarray) -> str:
 
 
 def save_obj(path: str | os.PathLike, positions, faces, uvs=None, normals=None) -> Path:
-    """Write an OBJ (exact float32 round trip: 9 significant digits) with optional vt / vn."""
+    """Write an OBJ (exact float32 round trip: 9 significant digits) with optional vt / vn.
+
+    Positions are written once each (``v``; UV-seam twins, vertices at the same position
+    with different UVs and equal normals, share one) with UVs per face corner
+    (``f v/vt/vn``), as OBJ allows: Blender and other importers see one connected surface
+    instead of pieces cut at every seam.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    f = np.asarray(faces, np.int64) + 1
-    parts = [_lines("v %.9g %.9g %.9g\n", np.asarray(positions, np.float32))]
+    p = np.asarray(positions, np.float32)
+    faces = np.asarray(faces, np.int64)
+    key = p if normals is None else np.concatenate([p, np.asarray(normals, np.float32)], 1)
+    _, first, shared = np.unique(key + np.float32(0), axis=0, return_index=True, return_inverse=True)
+    shared = shared.ravel()
+    fv, ft = shared[faces] + 1, faces + 1
+    parts = [_lines("v %.9g %.9g %.9g\n", p[first])]
     if uvs is not None:
         parts.append(_lines("vt %.9g %.9g\n", np.asarray(uvs, np.float32)))
     if normals is not None:
-        parts.append(_lines("vn %.6g %.6g %.6g\n", np.asarray(normals, np.float32)))
+        parts.append(_lines("vn %.6g %.6g %.6g\n", np.asarray(normals, np.float32)[first]))
     if uvs is not None and normals is not None:
-        parts.append(_lines("f %d/%d/%d %d/%d/%d %d/%d/%d\n", np.repeat(f, 3, axis=1)))
+        parts.append(_lines("f %d/%d/%d %d/%d/%d %d/%d/%d\n", np.stack([fv, ft, fv], 2).reshape(-1, 9)))
     elif uvs is not None:
-        parts.append(_lines("f %d/%d %d/%d %d/%d\n", np.repeat(f, 2, axis=1)))
+        parts.append(_lines("f %d/%d %d/%d %d/%d\n", np.stack([fv, ft], 2).reshape(-1, 6)))
+    elif normals is not None:
+        parts.append(_lines("f %d//%d %d//%d %d//%d\n", np.stack([fv, fv], 2).reshape(-1, 6)))
     else:
-        parts.append(_lines("f %d %d %d\n", f))
+        parts.append(_lines("f %d %d %d\n", fv))
     path.write_text("".join(parts))
     return path
 
@@ -127,6 +140,15 @@ def weld_ids(positions: np.ndarray) -> np.ndarray:
     """(V,) alias id of every vertex: twins at bit-identical float32 positions share one (§5)."""
     _, inverse = np.unique(np.asarray(positions, np.float32), axis=0, return_inverse=True)
     return inverse.ravel()
+
+
+def edge_counts(faces: np.ndarray, weld: np.ndarray) -> dict:
+    """Boundary (one face) and non-manifold (three or more faces) edges of a mesh, counted on
+    welded vertices (``weld``: (V,) position class), so UV seams are not boundaries."""
+    w = np.asarray(weld, np.int64)[np.asarray(faces, np.int64)]
+    e = np.sort(np.stack([w, np.roll(w, -1, axis=1)], 2).reshape(-1, 2), axis=1)
+    _, count = np.unique(e[:, 0] * (int(w.max()) + 1) + e[:, 1], return_counts=True)
+    return {"boundary_edges": int((count == 1).sum()), "non_manifold_edges": int((count > 2).sum())}
 
 
 def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:

@@ -13,8 +13,12 @@
 3. **Displacement** — P = p + d * dir, d bilinearly sampled from the map at the vertex's UV
    (Dr.Jit texture, clamp), dir the interpolated normal, or for direction formats
    normalize(x t + y b + z n) from the stored tangent-space direction.
-4. **Holes** — faces with at least two of three vertices sampling "void" in the bake's validity mask
-   (no high-poly within reach: a hole of the original) are dropped.
+4. **Holes** — vertices sampling "void" in the bake's validity mask (no high-poly within
+   reach) are counted.  On an *open* low-poly (boundary edges) a void region is a hole of the
+   original: faces with at least two of three void vertices are dropped.  A *closed* low-poly
+   never loses a face: its void vertices keep the map's value there, which the bake's edge
+   padding filled from the nearest measured texel (within the padding radius; beyond it the
+   displacement is 0, i.e. the low-poly position), so the restored mesh stays closed.
 5. **Normals** — area-weighted normals of the displaced faces summed over alias classes.
 """
 from __future__ import annotations
@@ -28,7 +32,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.bake import formats
-from mi_displace.bake.meshdata import MeshData, load_mesh, save_obj, weld_ids
+from mi_displace.bake.meshdata import MeshData, edge_counts, load_mesh, save_obj, weld_ids
 from mi_displace.bake.mikktspace import mikktspace, vertex_tangents
 from mi_displace.core.tessellate import (MAX_VERTICES, face_weighted_normals, gather,
                                          scatter_add, subdivision_topology)
@@ -46,6 +50,7 @@ class Restored:
     normals: np.ndarray
     uvs: np.ndarray
     seconds: float
+    report: dict   # closed, boundary/non-manifold edges, void vertices, dropped faces, holes rule
 
     def save(self, path: str | os.PathLike) -> None:
         """Write as OBJ or PLY (by suffix)."""
@@ -89,8 +94,9 @@ def restore(low, displacement_map, levels: int | None = 2, split: int | None = N
             :func:`formats.read_map` (``displacement`` (H, W) [object units], optional
             ``direction_tangent`` (H, W, 3)).
         levels, split: subdivision (see :func:`edge_splits`).
-        keep_holes: drop faces with two or three vertices over texels where the bake found no
-            high-poly (the map's validity mask ``valid.png``): holes of the original stay open.
+        keep_holes: on an open low-poly, drop faces with two or three vertices over texels
+            where the bake found no high-poly (the map's validity mask ``valid.png``): holes
+            of the original stay open.  A closed low-poly never loses a face (step 4 above).
     """
     L = edge_splits(levels, split)
     low = low if isinstance(low, MeshData) else load_mesh(low, "low-poly")
@@ -150,23 +156,62 @@ def restore(low, displacement_map, levels: int | None = 2, split: int | None = N
     count = dr.zeros(mi.Float, n_groups)
     scatter_add(total, d * direction, groups)
     dr.scatter_add(count, 1.0, groups)
-    p = p + gather(mi.Vector3f, total, groups) / dr.gather(mi.Float, count, groups)
-    if decoded.get("valid") is not None and keep_holes:
-        # vertices over texels where the bake found no high-poly; drop faces made only of them
+    offset = np.stack([np.asarray(c) for c in total], 1) / np.asarray(count)[:, None]   # (G, 3)
+    edges = edge_counts(low.faces, weld)
+    report = {"closed": edges["boundary_edges"] == 0, **edges, "void_vertices": 0,
+              "dropped_faces": 0, "holes": "no validity mask"}
+    if decoded.get("valid") is not None:
+        # alias classes over texels where the bake found no high-poly
         vsum = dr.zeros(mi.Float, n_groups)
         dr.scatter_add(vsum, _texture(decoded["valid"]).eval(lookup)[0], groups)
-        void = np.asarray(dr.gather(mi.Float, vsum, groups) / dr.gather(mi.Float, count, groups)) < 0.5
-        new_faces = new_faces[void[new_faces].sum(1) < VOID_CORNERS]
-        if len(new_faces) == 0:
-            raise ValueError("map: its validity mask marks every texel as void (nothing to restore)")
+        void_g = np.asarray(vsum) / np.asarray(count) < 0.5
+        void = void_g[group]
+        report["void_vertices"] = int(void.sum())
+        if report["closed"] or not keep_holes:
+            offset = _fill_from_neighbours(offset, void_g, group[new_faces])
+            report["holes"] = ("kept and filled: void vertices take the harmonic interpolation of "
+                               "their measured neighbours' displacement (none: the low-poly position)")
+        else:   # open low-poly: drop faces made mostly of void vertices (holes of the original)
+            keep = void[new_faces].sum(1) < VOID_CORNERS
+            report["dropped_faces"] = int((~keep).sum())
+            report["holes"] = "dropped: faces with 2 or 3 void vertices (open low-poly)"
+            new_faces = new_faces[keep]
+            if len(new_faces) == 0:
+                raise ValueError("map: its validity mask marks every texel as void (nothing to restore)")
+    p = p + gather(mi.Vector3f, mi.Vector3f(*[mi.Float(np.ascontiguousarray(offset[:, k], np.float32))
+                                              for k in range(3)]), groups)
     f = mi.Vector3u(*[mi.UInt32(new_faces[:, k]) for k in range(3)])
     nrm = face_weighted_normals(p, f, groups, n_groups, n)
     dr.eval(p, nrm, uv)
     out = Restored(np.stack([np.asarray(c) for c in p], 1), new_faces,
                    np.stack([np.asarray(c) for c in nrm], 1), np.stack([np.asarray(c) for c in uv], 1),
-                   time.perf_counter() - start)
+                   time.perf_counter() - start, report)
     if not (np.all(np.isfinite(out.positions)) and np.all(np.isfinite(out.normals))):
         raise ValueError("restore: the restored mesh has NaN/Inf vertices (check the map)")
+    return out
+
+
+def _fill_from_neighbours(offset: np.ndarray, void: np.ndarray, group_faces: np.ndarray) -> np.ndarray:
+    """Displacement vectors (G, 3) of the ``void`` alias classes replaced by the harmonic
+    interpolation of the measured ones around them (the graph Laplacian of the restored mesh's
+    edges solved over the void classes, SciPy sparse; a void region with no measured class
+    around it stays at the low-poly position)."""
+    from scipy.sparse import coo_matrix, diags
+    from scipy.sparse.linalg import spsolve
+
+    if not void.any():
+        return offset
+    G = len(offset)
+    a, b = group_faces.ravel(), np.roll(group_faces, -1, axis=1).ravel()
+    adj = coo_matrix((np.ones(2 * len(a)), (np.r_[a, b], np.r_[b, a])), shape=(G, G)).tocsr()
+    adj.data[:] = 1.0                                    # an edge shared by two faces counts once
+    lap = diags(np.asarray(adj.sum(1)).ravel()) - adj
+    v, k = np.flatnonzero(void), np.flatnonzero(~void)
+    # a tiny pull towards 0 keeps void regions without measured neighbours solvable (they stay 0)
+    system = (lap[v][:, v] + 1e-9 * diags(np.ones(len(v)))).tocsc()
+    rhs = -(lap[v][:, k] @ offset[k])
+    out = offset.copy()
+    out[v] = np.asarray(spsolve(system, rhs)).reshape(len(v), 3)
     return out
 
 
