@@ -208,6 +208,8 @@ class Baker:
         tri_hit = dr.zeros(mi.UInt32, self.layout.face_count)
         rows = max(1, CHUNK_SAMPLES // (W * aa * aa))
         start = time.perf_counter()
+        # opaque: the kernels do not change with the distances (nor with the block, below)
+        max_distance, delta = dr.opaque(mi.Float, max_distance), dr.opaque(mi.Float, delta)
         for row0 in range(0, H, rows):  # blocks of rows (bounded memory), not per texel
             n_rows = min(rows, H - row0)
             s = rasterize_rows(self.layout, W, H, row0, n_rows, aa, conservative)
@@ -235,6 +237,7 @@ def _fill_empty(flat: mi.Float, first: int, n_tex: int, C: int, max_distance: fl
     -max_distance."""
     idx = dr.arange(mi.UInt32, n_tex * C)
     c = idx % C
+    first = dr.opaque(mi.UInt32, first)
     value = mi.Float(0.0)
     for name in ("normal_tangent", "normal_object", "direction_tangent"):
         value = dr.select(c == Baker.CHANNELS[name][0] + 2, 1.0, value)     # the z component
@@ -263,9 +266,12 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.
     # status: the worst of the samples that hit, if any did (an anti-aliased texel keeps its
     # average when one sample misses), else the worst of all (miss / beyond / backface)
     st = dr.zeros(mi.UInt32, n_tex)
-    dr.scatter_reduce(dr.ReduceOp.Max, st, r.status, texel)
+    # ReduceMode.Local: the default may expand per-thread copies, baking the block size
+    # into the kernel (a new kernel per resolution)
+    local = dr.ReduceMode.Local
+    dr.scatter_reduce(dr.ReduceOp.Max, st, r.status, texel, mode=local)
     st_hit = dr.zeros(mi.UInt32, n_tex)
-    dr.scatter_reduce(dr.ReduceOp.Max, st_hit, dr.select(hit, r.status, 0), texel)
+    dr.scatter_reduce(dr.ReduceOp.Max, st_hit, dr.select(hit, r.status, 0), texel, mode=local)
     fallback = [dr.zeros(mi.Float, n_tex) for _ in range(3)]
     for k in range(3):  # the low-poly normal (what misses carry) of any sample of the texel
         dr.scatter(fallback[k], r.normal_object[k], texel)
@@ -278,10 +284,10 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.
     else:
         w = dr.select(hit, 1.0, 0.0)
         cnt = dr.zeros(mi.Float, n_tex)
-        dr.scatter_add(cnt, w, texel)
+        dr.scatter_add(cnt, w, texel, mode=local)
         sums = [dr.zeros(mi.Float, n_tex) for _ in values]
         for buf, v in zip(sums, values):
-            dr.scatter_add(buf, v, texel, hit)
+            dr.scatter_add(buf, v, texel, hit, mode=local)
     has = cnt > 0
     inv = dr.select(has, dr.rcp(cnt), 0.0)
     z = mi.Vector3f(0, 0, 1)
@@ -293,7 +299,7 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.
     if r.back_depth is not None:
         channels.append(dr.select(has, sums[10] * inv, -max_distance))
     C = len(channels)
-    base = (dr.arange(mi.UInt32, n_tex) + first) * C
+    base = (dr.arange(mi.UInt32, n_tex) + dr.opaque(mi.UInt32, first)) * C
     for c, v in enumerate(channels):
         dr.scatter(flat, v, base + c)
     dr.eval(flat)
