@@ -100,7 +100,8 @@ def rasterize_rows(layout: UVLayout, width: int, height: int, row0: int, rows: i
     v = 1.0 - (mi.Float(row) + (mi.Float(sub // A) + 0.5) / Af) / H
     pi = _cast(layout, u, v)
     hit = dr.compress(pi.is_valid())
-    texel_h = hit // (A * A)      # = texel[hit] (a gather from the counter would bake in its size)
+    # = texel[hit] (a gather from the counter would bake its size into the kernel)
+    texel_h = hit // (A * A) if dr.width(hit) else dr.zeros(mi.UInt32, 0)
     prim = dr.gather(mi.UInt32, pi.prim_index, hit)
     b1 = dr.gather(mi.Float, pi.prim_uv.x, hit)
     b2 = dr.gather(mi.Float, pi.prim_uv.y, hit)
