@@ -259,3 +259,40 @@ def vertex_tangents(faces, tangents, signs, vertex_count: int) -> tuple[np.ndarr
     t[used] = tangents.reshape(-1, 3)[first]
     s[used] = signs.ravel()[first]
     return t, s
+
+
+def decode_tangent_map(low, normal_tangent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Object-space normals from a tangent-space map, as a MikkTSpace renderer decodes it.
+
+    Per texel centre: the low-poly triangle and barycentrics (the baker's UV layout, no
+    conservative coverage), the interpolated unnormalised vertex normal n and MikkTSpace
+    tangent t, b = sign (n x t), N = normalize(x t + y b + z n).
+
+    Args:
+        low: :class:`~mi_displace.bake.meshdata.MeshData` with UVs (the bake's ``low.obj``).
+        normal_tangent: (H, W, 3) unit tangent-space normals (row 0 = v 1).
+
+    Returns:
+        (H, W, 3) float32 object-space normals (0 outside the charts) and the (H, W) bool
+        mask of texels whose centre lies in a UV triangle.
+    """
+    from mi_displace.bake.meshdata import vertex_normals
+    from mi_displace.bake.uv_raster import UVLayout, rasterize_rows
+
+    H, W, _ = normal_tangent.shape
+    s = rasterize_rows(UVLayout(low), W, H, 0, H, 1, conservative=False)
+    texel, f = np.asarray(s.texel, np.int64), np.asarray(s.prim, np.int64)
+    b1, b2 = np.asarray(s.b1), np.asarray(s.b2)
+    w = np.stack([1 - b1 - b2, b1, b2], 1)[..., None]
+    normals = vertex_normals(low.positions, low.faces)
+    tangents, signs = mikktspace(low.positions, low.faces, normals, low.uvs)
+    n = (normals[low.faces[f]] * w).sum(1)
+    t = (tangents[f] * w).sum(1)
+    b = np.sign((signs[f] * w[..., 0]).sum(1))[:, None] * np.cross(n, t)
+    x = normal_tangent.reshape(-1, 3)[texel]
+    v = x[:, :1] * t + x[:, 1:2] * b + x[:, 2:3] * n
+    out = np.zeros((H * W, 3), np.float32)
+    out[texel] = v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-30)
+    inside = np.zeros(H * W, bool)
+    inside[texel] = True
+    return out.reshape(H, W, 3), inside.reshape(H, W)
