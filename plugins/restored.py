@@ -20,6 +20,10 @@ the sensors (:mod:`mi_displace.bake.levels`): the referenced ones, else the scen
 ``redice_for(sensors)`` / ``fit_to_scene(scene)`` (the mi-displace loaders call them);
 until then from the map alone.  ``build_stats`` (a dict) holds levels, why, faces,
 vertices, bytes and seconds.
+
+``displacement`` (the map's texels, a (H, W, 1) tensor [object units]) is exposed through
+``mi.traverse`` as differentiable: an edit re-displaces the mesh (never stale), and with a
+gradient enabled the vertex positions and normals carry it (refine a bake against images).
 """
 from __future__ import annotations
 
@@ -69,10 +73,33 @@ class Restored(mi.Mesh):
             self.levels, self.why = levels, {"rule": "given"}
         edge_splits(self.levels, self.split)        # ValueError naming levels/split, before any kernel
         start = time.perf_counter()
-        out = restore(self.low, self.map_path, levels=self.levels, split=self.split,
+        decoded = formats.read_map(self.map_path)
+        out = restore(self.low, decoded, levels=self.levels, split=self.split,
                       keep_holes=self.keep_holes)
         super().__init__(props.id() or "restored", len(out.positions), len(out.faces), props, True, True)
+        # the map's texels [object units], differentiable: edits re-displace the mesh
+        self.displacement = mi.TensorXf(np.ascontiguousarray(decoded["displacement"][:, :, None], np.float32))
         self._upload(out, start)
+
+    def traverse(self, cb):
+        super().traverse(cb)
+        cb.put("displacement", self.displacement, mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, keys=[]):
+        if "displacement" not in keys:
+            super().parameters_changed(keys)
+            return
+        if self.displacement.shape != (*self.map_shape, 1):
+            raise ValueError(f"restored: 'displacement' must keep the map's shape "
+                             f"{(*self.map_shape, 1)}, got {self.displacement.shape}")
+        if not dr.all(dr.isfinite(dr.detach(self.displacement.array)))[0]:
+            raise ValueError("restored: 'displacement' has NaN/Inf texels")
+        p, n = self.state.displace(self.displacement)      # keeps the AD graph of the texels
+        to_world = mi.Transform4f(mi.ScalarTransform4f(mi.ScalarMatrix4f(self.to_world.astype(np.float32))))
+        params = mi.traverse(self)
+        params["vertex_positions"] = dr.ravel(to_world @ p)
+        params["vertex_normals"] = dr.ravel(dr.normalize(to_world @ mi.Normal3f(n)))
+        params.update()
 
     def _upload(self, out, start: float) -> None:
         to_world = mi.Transform4f(mi.ScalarTransform4f(mi.ScalarMatrix4f(self.to_world.astype(np.float32))))
@@ -85,6 +112,7 @@ class Restored(mi.Mesh):
         params["vertex_texcoords"] = mi.Float(np.ascontiguousarray(out.uvs.ravel()))
         params["faces"] = mi.UInt32(np.ascontiguousarray(out.faces.ravel()))
         params.update()
+        self.state = out.state
         V, F = len(out.positions), len(out.faces)
         self.build_stats = {"levels": self.levels, "split": self.split, **self.why,
                             "vertices": V, "faces": F, "bytes": V * 8 * 4 + F * 3 * 4,
@@ -104,7 +132,8 @@ class Restored(mi.Mesh):
             return False
         self.levels = levels
         start = time.perf_counter()
-        self._upload(restore(self.low, self.map_path, levels=levels, keep_holes=self.keep_holes), start)
+        self._upload(restore(self.low, formats.read_map(self.map_path), levels=levels,
+                             keep_holes=self.keep_holes), start)
         return True
 
     def fit_to_scene(self, scene) -> bool:

@@ -51,6 +51,7 @@ class Restored:
     uvs: np.ndarray
     seconds: float
     report: dict   # closed, boundary/non-manifold edges, void vertices, dropped faces, holes rule
+    state: "DisplaceState" = None   # what re-displaces the mesh from an edited map (Dr.Jit, AD)
 
     def save(self, path: str | os.PathLike) -> None:
         """Write as OBJ or PLY (by suffix)."""
@@ -64,6 +65,44 @@ class Restored:
             save_obj(path, self.positions, self.faces, self.uvs, self.normals)
         else:
             raise ValueError(f"out: restored mesh must be .ply or .obj, got {path!r}")
+
+
+@dataclass
+class DisplaceState:
+    """Step 3 as a function of the map: the subdivided low-poly (Dr.Jit, N vertices, G alias
+    classes) and what turns a displacement tensor (H, W, 1) [object units] into positions,
+    differentiably (the ``restored`` shape's map texels are optimisable through it).
+
+    ``fixed`` (G,) marks alias classes whose offset is not read from the map (void vertices of
+    a closed low-poly, filled from their neighbours: ``fixed_offset``, constant).
+    """
+
+    p: mi.Point3f                 # (N,) undisplaced subdivided positions
+    direction: mi.Vector3f        # (N,) unit displacement directions
+    lookup: mi.Point2f            # (N,) texture lookup (u, 1 - v)
+    groups: mi.UInt32             # (N,) alias class
+    count: mi.Float               # (G,) members per class
+    n_groups: int
+    fixed: mi.Bool = False
+    fixed_offset: mi.Vector3f = None
+    faces: mi.Vector3u = None
+    normals: mi.Vector3f = None   # (N,) interpolated low-poly normals (normal fallback)
+
+    def offsets(self, displacement: mi.TensorXf) -> mi.Vector3f:
+        """(G,) mean displacement vector of each alias class, bilinear from the map."""
+        tex = mi.Texture2f(displacement, filter_mode=dr.FilterMode.Linear,
+                           wrap_mode=dr.WrapMode.Clamp, use_accel=False)
+        d = tex.eval(self.lookup)[0]
+        total = dr.zeros(mi.Vector3f, self.n_groups)   # alias buffer: one displacement per class
+        scatter_add(total, d * self.direction, self.groups)
+        return total / self.count
+
+    def displace(self, displacement: mi.TensorXf) -> tuple[mi.Point3f, mi.Vector3f]:
+        """Positions (N,) and area-weighted normals (N,) of the mesh displaced by the map."""
+        off = dr.select(self.fixed, self.fixed_offset, self.offsets(displacement)) \
+            if self.fixed_offset is not None else self.offsets(displacement)
+        p = self.p + gather(mi.Vector3f, off, self.groups)
+        return p, face_weighted_normals(p, self.faces, self.groups, self.n_groups, self.normals)
 
 
 def edge_splits(levels: int | None, split: int | None) -> int:
@@ -141,7 +180,6 @@ def restore(low, displacement_map, levels: int | None = 2, split: int | None = N
     n = dr.normalize(n_raw)
     uv = mi.Point2f(interp(mi.Vector2f, low.uvs))
     lookup = mi.Point2f(uv.x, 1.0 - uv.y)          # image row 0 holds v = 1
-    d = _texture(disp).eval(lookup)[0]
     direction = n
     if dirs is not None:
         t_v, s_v = vertex_tangents(low.faces, *mikktspace(low.positions, low.faces, normals, low.uvs),
@@ -152,11 +190,11 @@ def restore(low, displacement_map, levels: int | None = 2, split: int | None = N
         direction = dr.normalize(x[0] * t + x[1] * b + x[2] * n_raw)
     groups = mi.UInt32(group)
     n_groups = int(group.max()) + 1
-    total = dr.zeros(mi.Vector3f, n_groups)        # alias buffer: one displacement per class
     count = dr.zeros(mi.Float, n_groups)
-    scatter_add(total, d * direction, groups)
     dr.scatter_add(count, 1.0, groups)
-    offset = np.stack([np.asarray(c) for c in total], 1) / np.asarray(count)[:, None]   # (G, 3)
+    state = DisplaceState(p, direction, lookup, groups, count, n_groups)
+    offset = np.stack([np.asarray(c) for c in state.offsets(
+        mi.TensorXf(np.ascontiguousarray(disp[:, :, None], np.float32)))], 1)     # (G, 3)
     edges = edge_counts(low.faces, weld)
     report = {"closed": edges["boundary_edges"] == 0, **edges, "void_vertices": 0,
               "dropped_faces": 0, "holes": "no validity mask"}
@@ -169,6 +207,9 @@ def restore(low, displacement_map, levels: int | None = 2, split: int | None = N
         report["void_vertices"] = int(void.sum())
         if report["closed"] or not keep_holes:
             offset = _fill_from_neighbours(offset, void_g, group[new_faces])
+            state.fixed = mi.Bool(void_g)
+            state.fixed_offset = mi.Vector3f(*[mi.Float(np.ascontiguousarray(offset[:, k], np.float32))
+                                               for k in range(3)])
             report["holes"] = ("kept and filled: void vertices take the harmonic interpolation of "
                                "their measured neighbours' displacement (none: the low-poly position)")
         else:   # open low-poly: drop faces made mostly of void vertices (holes of the original)
@@ -178,14 +219,13 @@ def restore(low, displacement_map, levels: int | None = 2, split: int | None = N
             new_faces = new_faces[keep]
             if len(new_faces) == 0:
                 raise ValueError("map: its validity mask marks every texel as void (nothing to restore)")
-    p = p + gather(mi.Vector3f, mi.Vector3f(*[mi.Float(np.ascontiguousarray(offset[:, k], np.float32))
-                                              for k in range(3)]), groups)
-    f = mi.Vector3u(*[mi.UInt32(new_faces[:, k]) for k in range(3)])
-    nrm = face_weighted_normals(p, f, groups, n_groups, n)
+    state.faces = mi.Vector3u(*[mi.UInt32(new_faces[:, k]) for k in range(3)])
+    state.normals = n
+    p, nrm = state.displace(mi.TensorXf(np.ascontiguousarray(disp[:, :, None], np.float32)))
     dr.eval(p, nrm, uv)
     out = Restored(np.stack([np.asarray(c) for c in p], 1), new_faces,
                    np.stack([np.asarray(c) for c in nrm], 1), np.stack([np.asarray(c) for c in uv], 1),
-                   time.perf_counter() - start, report)
+                   time.perf_counter() - start, report, state)
     if not (np.all(np.isfinite(out.positions)) and np.all(np.isfinite(out.normals))):
         raise ValueError("restore: the restored mesh has NaN/Inf vertices (check the map)")
     return out
