@@ -236,11 +236,11 @@ def _fill_from_neighbours(offset: np.ndarray, void: np.ndarray, group_faces: np.
     interpolation of the measured ones around them (the graph Laplacian of the restored mesh's
     edges solved over the void classes, SciPy sparse; a void region with no measured class
     around it stays at the low-poly position)."""
+    if not void.any():
+        return offset
     from scipy.sparse import coo_matrix, diags
     from scipy.sparse.linalg import spsolve
 
-    if not void.any():
-        return offset
     G = len(offset)
     a, b = group_faces.ravel(), np.roll(group_faces, -1, axis=1).ravel()
     adj = coo_matrix((np.ones(2 * len(a)), (np.r_[a, b], np.r_[b, a])), shape=(G, G)).tocsr()
