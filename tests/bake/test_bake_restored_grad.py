@@ -17,6 +17,18 @@ def shape_params(variant_llvm, tmp_path):
     return mi.traverse(scene)
 
 
+def _central_difference(params, key, base, texel, eps, value):
+    """(value(x + eps e_texel) - value(x - eps e_texel)) / (2 eps) over the 8 x 8 map."""
+    values = []
+    for sign in (1, -1):
+        x = base.copy()
+        x[texel] += sign * eps
+        params[key] = mi.TensorXf(x.reshape(8, 8, 1))
+        params.update()
+        values.append(value())
+    return (values[0] - values[1]) / (2 * eps)
+
+
 def _loss(params, w):
     return dr.sum(w * params["s.vertex_positions"])
 
@@ -35,16 +47,8 @@ def test_texel_gradients_match_finite_differences(shape_params):
     dr.backward(loss)
     grad = np.array(dr.grad(tensor).array)
     assert np.all(np.isfinite(grad)) and np.abs(grad).max() > 0
-    eps = 1e-3
     for texel in (0, 9, 27, 36, 63):
-        values = []
-        for sign in (1, -1):
-            x = base.copy()
-            x[texel] += sign * eps
-            params[key] = mi.TensorXf(x.reshape(8, 8, 1))
-            params.update()
-            values.append(float(_loss(params, w)[0]))
-        fd = (values[0] - values[1]) / (2 * eps)
+        fd = _central_difference(params, key, base, texel, 1e-3, lambda: float(_loss(params, w)[0]))
         assert grad[texel] == pytest.approx(fd, rel=0.02, abs=1e-3), texel
 
 
@@ -84,15 +88,8 @@ def test_render_gradient_of_a_texel_matches_finite_differences(variant_llvm, tmp
     assert np.all(np.isfinite(np.array(img)))
     dr.backward(dr.mean(img.array))
     grad = np.array(dr.grad(tensor).array)
-    eps = 2e-3
     for texel in (18, 27):          # texels under the lit middle of the view
-        values = []
-        for sign in (1, -1):
-            x = base.copy()
-            x[texel] += sign * eps
-            params[key] = mi.TensorXf(x.reshape(8, 8, 1))
-            params.update()
-            values.append(float(dr.mean(mi.render(scene, params, spp=256, seed=2).array)[0]))
-        fd = (values[0] - values[1]) / (2 * eps)
+        fd = _central_difference(params, key, base, texel, 2e-3, lambda: float(
+            dr.mean(mi.render(scene, params, spp=256, seed=2).array)[0]))
         assert abs(fd) > 1e-3 and np.sign(grad[texel]) == np.sign(fd)
         assert grad[texel] == pytest.approx(fd, rel=0.1), (texel, grad[texel], fd)
