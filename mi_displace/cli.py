@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import inspect
 import pkgutil
 import re
 import sys
@@ -98,6 +99,12 @@ def _seed(text: str) -> int:
     return value
 
 
+def _version() -> str:
+    from mi_displace import __version__
+
+    return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``mi-displace``."""
     parser = argparse.ArgumentParser(
@@ -105,6 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--variant", help="Mitsuba variant (default: $MI_DISPLACE_VARIANT or llvm_ad_rgb)")
     parser.add_argument("--quiet", action="store_true",
                         help="no progress lines (default: shown when stderr is a terminal)")
+    parser.add_argument("--version", action="version", version=f"mi-displace {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     def quick_and_max_spp(p):
@@ -143,6 +151,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="run a benchmark module mi_displace.bench.NAME")
     p.add_argument("name", help="benchmark name")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.add_argument("--out", default=None,
+                   help="folder for the benchmark's figures (benchmarks that write files; "
+                        "default: a folder in the system's temporary directory)")
 
     for name in COMMAND_MODULES:
         for command, handler in importlib.import_module(name).add_commands(sub).items():
@@ -272,7 +283,12 @@ def _cmd_bench(args) -> int:
     if args.name not in available:
         raise UsageError(f"unknown benchmark {args.name!r}; available: {', '.join(available) or 'none'}")
     module = importlib.import_module(f"mi_displace.bench.{args.name}")
-    result = module.main(json=args.json)
+    kwargs = {}
+    if args.out is not None:
+        if "out" not in inspect.signature(module.main).parameters:
+            raise UsageError(f"benchmark {args.name!r} writes no files; it takes no --out")
+        kwargs["out"] = args.out
+    result = module.main(json=args.json, **kwargs)
     return result if isinstance(result, int) else 0
 
 

@@ -5,22 +5,38 @@
     <shape type="restored">
         <string name="map" value="bake_out/d16.png"/>   <!-- any baked map with its sidecar -->
         <string name="low" value="bake_out/low.obj"/>   <!-- optional: default from the sidecar -->
-        <integer name="levels" value="2"/>              <!-- rounds of 1->4 subdivision -->
+        <string name="levels" value="auto"/>            <!-- or an integer: rounds of 1->4 -->
+        <float name="dicing_rate" value="1"/>           <!-- auto: pixels per micro-edge -->
+        <ref id="camera"/>                              <!-- optional: sensors for auto -->
         <!-- or <integer name="split" value="3"/>: the uniform 1->N^2 pattern -->
-        <boolean name="keep_holes" value="true"/>       <!-- drop faces over void texels -->
+        <boolean name="keep_holes" value="true"/>       <!-- open low-polys: drop faces over void -->
         <bsdf type="diffuse"/>
     </shape>
 
-The mesh is built once by :func:`mi_displace.bake.restore.restore` (Dr.Jit subdivision and
+The mesh is built by :func:`mi_displace.bake.restore.restore` (Dr.Jit subdivision and
 displacement, alias-welded seams, recomputed normals) and uploaded into this ``mi.Mesh``.
+``levels="auto"`` derives the levels from the map resolution and the projected size through
+the sensors (:mod:`mi_displace.bake.levels`): the referenced ones, else the scene's, given by
+``redice_for(sensors)`` / ``fit_to_scene(scene)`` (the mi-displace loaders call them);
+until then from the map alone.  ``build_stats`` (a dict) holds levels, why, faces,
+vertices, bytes and seconds.
+
+``displacement`` (the map's texels, a (H, W, 1) tensor [object units]) is exposed through
+``mi.traverse`` as differentiable: an edit re-displaces the mesh (never stale), and with a
+gradient enabled the vertex positions and normals carry it (refine a bake against images).
 """
 from __future__ import annotations
+
+import time
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.bake.restore import low_for_map, restore
+from mi_displace.bake import formats
+from mi_displace.bake.levels import auto_levels
+from mi_displace.bake.meshdata import load_mesh
+from mi_displace.bake.restore import edge_splits, low_for_map, restore
 from mi_displace.plugins._guard import constructor
 
 
@@ -30,16 +46,64 @@ class Restored(mi.Mesh):
     def __init__(self, props: mi.Properties):
         if "map" not in props:
             raise ValueError("restored: needs a 'map' (a baked map with its .json sidecar)")
+        # sensors referenced for levels="auto" (Mitsuba's Shape would take one as its own child)
+        keys = [k for k in props.keys() if isinstance(props.get(k), mi.Sensor)]
+        self.sensors = [props.get(k) for k in keys]
+        for k in keys:
+            del props[k]
         resolver = mi.file_resolver()   # paths relative to the scene file
-        map_path = str(resolver.resolve(str(props.get("map"))))
-        low = str(resolver.resolve(str(props.get("low")))) if "low" in props else low_for_map(map_path)
+        self.map_path = str(resolver.resolve(str(props.get("map"))))
+        low = str(resolver.resolve(str(props.get("low")))) if "low" in props else low_for_map(self.map_path)
         levels = props.get("levels", 2)
-        split = props.get("split", None)
-        out = restore(low, map_path, levels=levels, split=split,
-                      keep_holes=bool(props.get("keep_holes", True)))
+        self.auto = isinstance(levels, str) and levels.strip() == "auto"
+        if isinstance(levels, str) and not self.auto:
+            if not levels.strip().isdigit():
+                raise ValueError(f"restored: levels must be an integer or 'auto', got {levels!r}")
+            levels = int(levels)
+        self.split = props.get("split", None)
+        self.dicing_rate = float(props.get("dicing_rate", 1.0))
+        self.keep_holes = bool(props.get("keep_holes", True))
+        self.low = load_mesh(low, "low-poly")
+        self.map_shape = (int(formats.read_metadata(self.map_path)["height"]),
+                          int(formats.read_metadata(self.map_path)["width"]))
+        self.to_world = np.array(props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float64)
+        if self.auto:
+            self.levels, self.why = auto_levels(self.low, self.map_shape, self.sensors,
+                                                self.to_world, self.dicing_rate)
+        else:
+            self.levels, self.why = levels, {"rule": "given"}
+        edge_splits(self.levels, self.split)        # ValueError naming levels/split, before any kernel
+        start = time.perf_counter()
+        decoded = formats.read_map(self.map_path)
+        out = restore(self.low, decoded, levels=self.levels, split=self.split,
+                      keep_holes=self.keep_holes)
         super().__init__(props.id() or "restored", len(out.positions), len(out.faces), props, True, True)
-        to_world = mi.Transform4f(mi.ScalarTransform4f(mi.ScalarMatrix4f(np.array(
-            props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float32))))
+        # the map's texels [object units], differentiable: edits re-displace the mesh
+        self.displacement = mi.TensorXf(np.ascontiguousarray(decoded["displacement"][:, :, None], np.float32))
+        self._upload(out, start)
+
+    def traverse(self, cb):
+        super().traverse(cb)
+        cb.put("displacement", self.displacement, mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, keys=[]):
+        if "displacement" not in keys:
+            super().parameters_changed(keys)
+            return
+        if self.displacement.shape != (*self.map_shape, 1):
+            raise ValueError(f"restored: 'displacement' must keep the map's shape "
+                             f"{(*self.map_shape, 1)}, got {self.displacement.shape}")
+        if not dr.all(dr.isfinite(dr.detach(self.displacement.array)))[0]:
+            raise ValueError("restored: 'displacement' has NaN/Inf texels")
+        p, n = self.state.displace(self.displacement)      # keeps the AD graph of the texels
+        to_world = mi.Transform4f(mi.ScalarTransform4f(mi.ScalarMatrix4f(self.to_world.astype(np.float32))))
+        params = mi.traverse(self)
+        params["vertex_positions"] = dr.ravel(to_world @ p)
+        params["vertex_normals"] = dr.ravel(dr.normalize(to_world @ mi.Normal3f(n)))
+        params.update()
+
+    def _upload(self, out, start: float) -> None:
+        to_world = mi.Transform4f(mi.ScalarTransform4f(mi.ScalarMatrix4f(self.to_world.astype(np.float32))))
         p = to_world @ mi.Point3f(*[mi.Float(np.ascontiguousarray(out.positions[:, k])) for k in range(3)])
         n = dr.normalize(to_world @ mi.Normal3f(*[mi.Float(np.ascontiguousarray(out.normals[:, k]))
                                                   for k in range(3)]))
@@ -49,11 +113,40 @@ class Restored(mi.Mesh):
         params["vertex_texcoords"] = mi.Float(np.ascontiguousarray(out.uvs.ravel()))
         params["faces"] = mi.UInt32(np.ascontiguousarray(out.faces.ravel()))
         params.update()
-        self.build_stats = {"restore_s": out.seconds, "vertices": len(out.positions),
-                            "faces": len(out.faces)}
+        self.state = out.state
+        V, F = len(out.positions), len(out.faces)
+        self.build_stats = {"levels": self.levels, "split": self.split, **self.why,
+                            "vertices": V, "faces": F, "bytes": V * 8 * 4 + F * 3 * 4,
+                            "restore_s": out.seconds, "build_s": time.perf_counter() - start,
+                            **out.report}
+
+    def redice_for(self, sensors) -> bool:
+        """``levels="auto"``: re-derive the levels for ``sensors`` (the scene's, unless the
+        shape references its own) and rebuild if they changed; True if rebuilt."""
+        if not self.auto or self.split is not None:
+            return False
+        levels, why = auto_levels(self.low, self.map_shape, self.sensors or list(sensors),
+                                  self.to_world, self.dicing_rate)
+        self.why = why
+        if levels == self.levels:
+            self.build_stats.update(why)
+            return False
+        self.levels = levels
+        start = time.perf_counter()
+        self._upload(restore(self.low, formats.read_map(self.map_path), levels=levels,
+                             keep_holes=self.keep_holes), start)
+        return True
+
+    def fit_to_scene(self, scene) -> bool:
+        """The same for a loaded scene: its sensors, then its acceleration structure."""
+        changed = self.redice_for(scene.sensors())
+        if changed:
+            scene.parameters_changed([])
+        return changed
 
     def to_string(self):
-        return f"Restored[vertices={self.build_stats['vertices']}, faces={self.build_stats['faces']}]"
+        return (f"Restored[levels={self.levels}, vertices={self.build_stats['vertices']}, "
+                f"faces={self.build_stats['faces']}]")
 
 
 def register():

@@ -16,6 +16,7 @@ Units: distances in the meshes' object units; resolutions in texels.
 """
 from __future__ import annotations
 
+import datetime
 import json
 import math
 import os
@@ -30,8 +31,9 @@ import numpy as np
 
 from mi_displace.bake import diagnostics as diag
 from mi_displace.bake import formats, padding, unwrap
-from mi_displace.bake.meshdata import (MeshData, check_mesh, load_mesh, save_obj, tangent_frame,
-                                       uv_triangle_stats)
+from mi_displace.bake.meshdata import (MeshData, check_mesh, edge_counts, load_mesh, save_obj,
+                                       uv_triangle_stats, weld_ids)
+from mi_displace.bake.mikktspace import mikktspace
 from mi_displace.bake.trace import AMBIGUOUS, EMPTY, HighPoly, LowPolyDevice, OK, trace
 from mi_displace.bake.uv_raster import (OVERLAP_RESOLUTION, UVLayout, overlap_texels,
                                         rasterize_rows)
@@ -40,8 +42,30 @@ CHUNK_SAMPLES = 1 << 20        # samples per block of rows (bounds device memory
 BYTES_PER_TEXEL = 160          # host: maps, status, padding transform and encoded copies
 BYTES_PER_SAMPLE = 240         # device: samples, rays, intersections, interpolated frame
 MAX_RESOLUTION = 16384
-DEFAULT_MAX_DISTANCE_REL = 0.1  # of the high-poly's bounding-box diagonal
+DISTANCE_MARGIN = 1.5           # default max_distance = margin x one-sided Hausdorff low -> high
+DISTANCE_FLOOR_REL = 0.005      # ... plus this fraction of the high-poly's diagonal
+DISTANCE_SAMPLES = 20_000       # low-poly surface samples of that Hausdorff distance
 DEFAULT_DELTA_REL = 1e-5
+
+
+def default_max_distance(high: MeshData, low: MeshData) -> tuple[float, dict]:
+    """The search distance derived from the pair: DISTANCE_MARGIN x the one-sided Hausdorff
+    distance of the low-poly to the high-poly (how far the high-poly strays from it, measured
+    on the low-poly's vertices and DISTANCE_SAMPLES area samples) + DISTANCE_FLOOR_REL of the
+    diagonal [object units].  A fixed fraction of the diagonal lets texels on thin parts reach
+    far surfaces; this stays as close as the pair allows."""
+    from trimesh.sample import sample_surface
+
+    from mi_displace.evaluate.metrics import point_mesh_distance
+
+    start = time.perf_counter()
+    points, _ = sample_surface(low.to_trimesh(), DISTANCE_SAMPLES, seed=0)
+    points = np.concatenate([points, low.positions.astype(np.float64)])
+    hausdorff = float(point_mesh_distance(points, high.to_trimesh()).max())
+    distance = DISTANCE_MARGIN * hausdorff + DISTANCE_FLOOR_REL * high.diagonal
+    return distance, {"rule": f"{DISTANCE_MARGIN} x one-sided Hausdorff low->high + "
+                              f"{DISTANCE_FLOOR_REL:g} x diagonal",
+                      "hausdorff_low_to_high": hausdorff, "seconds": time.perf_counter() - start}
 
 
 def available_memory() -> int:
@@ -138,16 +162,20 @@ class Baker:
 
     def __init__(self, high: MeshData, low: MeshData, cage=None, cage_offset: float | None = None):
         normals = low.normals()
-        tangents, signs = tangent_frame(low.positions, low.faces, low.uvs, normals)
+        tangents, signs = mikktspace(low.positions, low.faces, normals, low.uvs)
         cage_pos = None
         if cage is not None:
             cage = cage if isinstance(cage, MeshData) else load_mesh(cage, "cage")
-            if cage.positions.shape != low.positions.shape or not np.array_equal(
-                    cage.faces, low.faces):
-                raise ValueError(f"cage: must have the low-poly's vertices and faces "
-                                 f"({len(low.positions)} vertices, {len(low.faces)} faces), got "
-                                 f"{len(cage.positions)} and {len(cage.faces)}")
-            cage_pos = cage.positions
+            # corresponding face corners (an OBJ reader may number the vertices differently)
+            cage_pos = np.zeros_like(low.positions)
+            if len(cage.faces) == len(low.faces):
+                cage_pos[low.faces] = cage.positions[cage.faces]
+            if len(cage.faces) != len(low.faces) or not np.array_equal(
+                    cage_pos[low.faces], cage.positions[cage.faces]):
+                raise ValueError(f"cage: must have the low-poly's faces, corner for corner "
+                                 f"({len(low.faces)} faces), got {len(cage.faces)} faces"
+                                 + (" that do not share the low-poly's vertices"
+                                    if len(cage.faces) == len(low.faces) else ""))
         elif cage_offset is not None:
             if not (math.isfinite(cage_offset) and cage_offset > 0):
                 raise ValueError(f"cage_offset: must be a positive distance, got {cage_offset!r}")
@@ -164,7 +192,7 @@ class Baker:
 
     def run(self, width: int, height: int, aa: int, max_distance: float, delta: float,
             dual_depth: bool, conservative: bool = True,
-            continuation: bool = False) -> tuple[np.ndarray, dict]:
+            continuation: bool = False, progress=None) -> tuple[np.ndarray, dict]:
         """Bake all texels.
 
         Returns:
@@ -179,6 +207,9 @@ class Baker:
         conservative_samples = 0
         tri_hit = dr.zeros(mi.UInt32, self.layout.face_count)
         rows = max(1, CHUNK_SAMPLES // (W * aa * aa))
+        start = time.perf_counter()
+        # opaque: the kernels do not change with the distances (nor with the block, below)
+        max_distance, delta = dr.opaque(mi.Float, max_distance), dr.opaque(mi.Float, delta)
         for row0 in range(0, H, rows):  # blocks of rows (bounded memory), not per texel
             n_rows = min(rows, H - row0)
             s = rasterize_rows(self.layout, W, H, row0, n_rows, aa, conservative)
@@ -190,6 +221,8 @@ class Baker:
             r = trace(self.high_dev, self.low_dev, s.prim, s.b1, s.b2, max_distance, delta,
                       dual_depth, continuation)
             _texel_average(r, s.texel, n_rows * W, aa, max_distance, flat, row0 * W)
+            if progress is not None:
+                progress(f"  rows {row0 + n_rows}/{H} traced ({time.perf_counter() - start:.1f} s)")
         ores = min(max(width, height), OVERLAP_RESOLUTION)
         extra = {"uv_overlap_texels": overlap_texels(self.layout, ores),
                  "uv_overlap_resolution": ores, "conservative_samples": conservative_samples,
@@ -204,6 +237,7 @@ def _fill_empty(flat: mi.Float, first: int, n_tex: int, C: int, max_distance: fl
     -max_distance."""
     idx = dr.arange(mi.UInt32, n_tex * C)
     c = idx % C
+    first = dr.opaque(mi.UInt32, first)
     value = mi.Float(0.0)
     for name in ("normal_tangent", "normal_object", "direction_tangent"):
         value = dr.select(c == Baker.CHANNELS[name][0] + 2, 1.0, value)     # the z component
@@ -232,9 +266,12 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.
     # status: the worst of the samples that hit, if any did (an anti-aliased texel keeps its
     # average when one sample misses), else the worst of all (miss / beyond / backface)
     st = dr.zeros(mi.UInt32, n_tex)
-    dr.scatter_reduce(dr.ReduceOp.Max, st, r.status, texel)
+    # ReduceMode.Local: the default may expand per-thread copies, baking the block size
+    # into the kernel (a new kernel per resolution)
+    local = dr.ReduceMode.Local
+    dr.scatter_reduce(dr.ReduceOp.Max, st, r.status, texel, mode=local)
     st_hit = dr.zeros(mi.UInt32, n_tex)
-    dr.scatter_reduce(dr.ReduceOp.Max, st_hit, dr.select(hit, r.status, 0), texel)
+    dr.scatter_reduce(dr.ReduceOp.Max, st_hit, dr.select(hit, r.status, 0), texel, mode=local)
     fallback = [dr.zeros(mi.Float, n_tex) for _ in range(3)]
     for k in range(3):  # the low-poly normal (what misses carry) of any sample of the texel
         dr.scatter(fallback[k], r.normal_object[k], texel)
@@ -247,10 +284,10 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.
     else:
         w = dr.select(hit, 1.0, 0.0)
         cnt = dr.zeros(mi.Float, n_tex)
-        dr.scatter_add(cnt, w, texel)
+        dr.scatter_add(cnt, w, texel, mode=local)
         sums = [dr.zeros(mi.Float, n_tex) for _ in values]
         for buf, v in zip(sums, values):
-            dr.scatter_add(buf, v, texel, hit)
+            dr.scatter_add(buf, v, texel, hit, mode=local)
     has = cnt > 0
     inv = dr.select(has, dr.rcp(cnt), 0.0)
     z = mi.Vector3f(0, 0, 1)
@@ -262,7 +299,7 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.
     if r.back_depth is not None:
         channels.append(dr.select(has, sums[10] * inv, -max_distance))
     C = len(channels)
-    base = (dr.arange(mi.UInt32, n_tex) + first) * C
+    base = (dr.arange(mi.UInt32, n_tex) + dr.opaque(mi.UInt32, first)) * C
     for c, v in enumerate(channels):
         dr.scatter(flat, v, base + c)
     dr.eval(flat)
@@ -272,7 +309,8 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
          pad: float = 8, map_formats=formats.DEFAULT_FORMATS, diagnostics: bool = False,
          cage=None, cage_offset: float | None = None, target_faces: int = 5000,
          smoothing_iterations: int = 10, conservative: bool = True,
-         min_hit_fraction: float = 0.5, delta: float | None = None) -> BakeResult:
+         min_hit_fraction: float = 0.5, delta: float | None = None,
+         progress=None) -> BakeResult:
     """Bake maps of ``high`` over ``low`` (paths or :class:`MeshData`).
 
     Args:
@@ -283,8 +321,8 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
         res: map size in texels (int, or (width, height)).
         out_dir: folder for maps, sidecars, ``low.obj`` and ``bake.json`` (``None``: no files).
         aa: sub-samples per texel side (aa x aa regular grid; 1 = texel centre).
-        max_distance: largest |displacement| searched [object units]; default 10 % of the
-            high-poly's bounding-box diagonal.
+        max_distance: largest |displacement| searched [object units]; default derived from
+            the pair (:func:`default_max_distance`), recorded in ``bake.json``.
         pad: edge padding radius [texels]; texels that missed the high-poly are filled
             from their nearest hit texel within the same radius.
         map_formats: names from :data:`formats.FORMATS`.
@@ -295,21 +333,33 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
         min_hit_fraction: fewest covered texels that must find the high-poly; below it the
             low-poly is taken not to sit near the high-poly (ValueError, no empty map).
         delta: ray start offset [object units]; default 1e-5 of the diagonal.
+        progress: callable taking one line of text per stage (the CLI prints them); None: quiet.
     """
     t0 = time.perf_counter()
+    say = progress or (lambda line: None)
+    inputs = {k: None if v is None else v.name if isinstance(v, MeshData) else os.path.abspath(v)
+              for k, v in (("high", high), ("low", low), ("cage", cage))}
     map_formats = formats.check_formats(map_formats)
     width, height = check_settings(res, aa, max_distance, pad)
     high, low, timings = prepare_inputs(high, low, target_faces, smoothing_iterations)
-    max_distance = DEFAULT_MAX_DISTANCE_REL * high.diagonal if max_distance is None else float(max_distance)
+    say(f"inputs: high-poly {len(high.faces):,} faces, low-poly {len(low.faces):,} faces "
+        f"({time.perf_counter() - t0:.1f} s)")
+    if max_distance is None:
+        max_distance, distance_info = default_max_distance(high, low)
+        say(f"search distance {max_distance:.4g} ({distance_info['rule']}; Hausdorff "
+            f"{distance_info['hausdorff_low_to_high']:.4g}, {distance_info['seconds']:.1f} s)")
+    else:
+        max_distance, distance_info = float(max_distance), {"rule": "given"}
     delta = DEFAULT_DELTA_REL * high.diagonal if delta is None else float(delta)
     uv_stats = uv_triangle_stats(low.uvs, low.faces)
     start = time.perf_counter()
     baker = Baker(high, low, cage, cage_offset)
     dr.eval()
     timings["accel_s"] = time.perf_counter() - start
+    say(f"acceleration structures and MikkTSpace frame ({timings['accel_s']:.1f} s)")
     start = time.perf_counter()
     image, extra = baker.run(width, height, aa, max_distance, delta,
-                             "dual_d8_n16" in map_formats, conservative, diagnostics)
+                             "dual_d8_n16" in map_formats, conservative, diagnostics, say)
     timings["raster_trace_s"] = time.perf_counter() - start
     status = image[..., Baker.CHANNELS["status"][0]].astype(np.uint8)
     covered = status != EMPTY
@@ -326,6 +376,7 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
     maps["valid"] = valid
     maps["filled"] = filled     # texels holding a value (covered or padded): quantisation range
     timings["bake_s"] = timings["accel_s"] + timings["raster_trace_s"] + timings["padding_s"]
+    say(f"padding ({timings['padding_s']:.1f} s)")
     count = diag.counts(status)
     n_cov = int(covered.sum())
     hits = count["ok"] + count["ambiguous"]
@@ -338,12 +389,18 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
             f"low-poly does not sit near the high-poly: only {hits} of {n_cov} covered texels "
             f"reached it within max_distance={max_distance:.4g} (misses {count['miss']}, beyond "
             f"{count['beyond']}); align the meshes or raise max_distance")
+    from mi_displace import __version__
+
     record = {
+        "inputs": inputs,
+        "tool": {"mi_displace": __version__, "mitsuba": mi.__version__, "drjit": dr.__version__},
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "high": {"name": high.name, "vertices": len(high.positions), "faces": len(high.faces),
                  "diagonal": high.diagonal},
         "low": {"name": low.name, "vertices": len(low.positions), "faces": len(low.faces),
-                "notes": low.notes, **uv_stats},
+                "notes": low.notes, **uv_stats, **edge_counts(low.faces, weld_ids(low.positions))},
         "settings": {"width": width, "height": height, "aa": aa, "max_distance": max_distance,
+                     "max_distance_rule": distance_info,
                      "delta": delta, "padding": pad, "formats": list(map_formats),
                      "cage": None if cage is None else str(cage) if not isinstance(cage, MeshData) else cage.name,
                      "cage_offset": cage_offset, "conservative": conservative,
@@ -357,6 +414,7 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
     result = BakeResult(maps, status, covered, low, record)
     if out_dir is not None:
         write_outputs(result, Path(out_dir), map_formats, diagnostics)
+        say(f"wrote {len(record['files'])} files ({timings['write_s']:.1f} s)")
     timings["total_s"] = time.perf_counter() - t0
     if out_dir is not None:
         (Path(out_dir) / "bake.json").write_text(json.dumps(record, indent=2))

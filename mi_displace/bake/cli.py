@@ -41,9 +41,12 @@ def add_commands(sub) -> dict:
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--aa", type=_int, default=1, help="sub-samples per texel side (default 1)")
     p.add_argument("--max-distance", type=_positive_float, default=None,
-                   help="largest |displacement| searched, object units (default 10%% of the diagonal)")
+                   help="largest |displacement| searched, object units (default: 1.5 x the one-sided "
+                        "Hausdorff distance low -> high + 0.5%% of the diagonal)")
     p.add_argument("--padding", type=float, default=8, help="edge padding in texels (default 8)")
-    p.add_argument("--formats", default=None, help="comma-separated map formats (default: all)")
+    p.add_argument("--formats", default=None,
+                   help="comma-separated map formats, or 'all' (default: d16,normal_tangent; "
+                        "valid.png, the mask, is always written)")
     p.add_argument("--diagnostics", action="store_true", help="diagnostics mode: overhang rays and diagnostics.png")
     p.add_argument("--cage", default=None, help="cage mesh with the low-poly's topology (Fig. 8)")
     p.add_argument("--cage-offset", type=_positive_float, default=None,
@@ -77,16 +80,21 @@ def _cmd_bake(args) -> int:
                       max_distance=args.max_distance, pad=args.padding, map_formats=fmts,
                       diagnostics=args.diagnostics, cage=args.cage,
                       cage_offset=args.cage_offset, target_faces=args.target_faces,
-                      smoothing_iterations=args.smoothing)
+                      smoothing_iterations=args.smoothing,
+                      progress=lambda line: print(f"bake: {line}", flush=True))
     for w in caught:
         print(f"mi-displace: warning: {w.message}")
     r = result.record
-    c, t = r["counts"], r["timings"]
-    for note in r["low"]["notes"]:
+    c, t, lo = r["counts"], r["timings"], r["low"]
+    for note in lo["notes"]:
         print(f"low-poly: {note}")
-    print(f"baked {r['settings']['width']}x{r['settings']['height']} (aa {r['settings']['aa']}): "
+    print(f"low-poly: {lo['boundary_edges']} boundary edges, {lo['non_manifold_edges']} "
+          f"non-manifold edge{'' if lo['non_manifold_edges'] == 1 else 's'}")
+    print(f"baked {r['settings']['width']}x{r['settings']['height']} (aa {r['settings']['aa']}, "
+          f"search distance {r['settings']['max_distance']:.4g}): "
           f"{c['covered']} texels covered, ok {c['ok']}, ambiguous {c['ambiguous']}, "
-          f"backface {c['backface']}, beyond {c['beyond']}, miss {c['miss']}; "
+          f"backface {c['backface']}, missed {c['miss'] + c['beyond']} (beyond the search "
+          f"distance {c['beyond']}, nothing {c['miss']}); "
           f"bake {t['bake_s']:.3f} s (acceleration {t['accel_s']:.3f} s)\n"
           f"wrote {args.out}/bake.json and {len(r['files'])} files")
     return 0
@@ -101,8 +109,12 @@ def _cmd_restore(args) -> int:
     with stage(f"restoring {args.map}"):
         out = restore(low, args.map, levels=args.levels, split=args.split)
     out.save(args.out)
+    r = out.report
     print(f"restored {len(out.faces)} triangles, {len(out.positions)} vertices in "
-          f"{out.seconds:.3f} s; wrote {args.out}")
+          f"{out.seconds:.3f} s; wrote {args.out}\n"
+          f"low-poly {'closed' if r['closed'] else 'open'} ({r['boundary_edges']} boundary, "
+          f"{r['non_manifold_edges']} non-manifold edges); {r['void_vertices']} vertices over "
+          f"texels without high-poly, {r['dropped_faces']} faces dropped; holes {r['holes']}")
     return 0
 
 

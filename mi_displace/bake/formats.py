@@ -23,7 +23,7 @@ format (file)             pixel   channels
 ``d16_n16`` (.png)        RGBA 8  R,G displacement high, low byte; B,A normal x,y
 ``float`` (.exr)          float   D displacement, NX NY NZ normal, DX DY DZ direction,
                                   B back depth (all float32, ZIP)
-``normal_tangent`` (.png) RGB 8   tangent-space normal map (MikkTSpace-equivalent frame)
+``normal_tangent`` (.png) RGB 8   tangent-space normal map (MikkTSpace frame)
 ``normal_object`` (.png)  RGB 8   object-space normal map
 ========================  ======  =====================================================
 """
@@ -40,16 +40,18 @@ FORMATS = {
     "dual_d8_n16": ".png", "d16_n16": ".png", "float": ".exr",
     "normal_tangent": ".png", "normal_object": ".png",
 }
-DEFAULT_FORMATS = tuple(FORMATS)
+#: what a user asks for most: 16-bit displacement and the tangent-space normal map (the
+#: validity mask ``valid.png`` is always written); ``--formats all`` writes every format
+DEFAULT_FORMATS = ("d16", "normal_tangent")
 UV_CONVENTION = "texel (c, r) centre at u = (c + 0.5) / W, v = 1 - (r + 0.5) / H (v up, row 0 on top)"
-TANGENT_CONVENTION = ("MikkTSpace-equivalent: vertex tangents from UV gradients, angle-weighted, "
-                      "orthogonalised to the vertex normal; bitangent = sign * cross(n, t) per pixel "
-                      "from the interpolated, unnormalised n and t; normal = normalize(x t + y b + z n)")
+TANGENT_CONVENTION = ("MikkTSpace (genTangSpaceDefault) over the vertex normals written in low.obj; "
+                      "bitangent = sign * cross(n, t) per pixel from the interpolated, unnormalised "
+                      "n and t; normal = normalize(x t + y b + z n)")
 
 
 def check_formats(formats) -> tuple[str, ...]:
     """Validate a list of format names (ValueError naming the unknown ones)."""
-    formats = tuple(formats)
+    formats = tuple(FORMATS) if formats == "all" or tuple(formats) == ("all",) else tuple(formats)
     bad = [f for f in formats if f not in FORMATS]
     if bad or not formats:
         raise ValueError(f"formats: unknown {bad or 'empty list'}; choose from {', '.join(FORMATS)}")

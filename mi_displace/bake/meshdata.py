@@ -7,16 +7,11 @@ image row 0 (the top of a PNG) holds v = 1 (texel (col c, row r) has its centre 
 u = (c + 0.5) / W, v = 1 - (r + 0.5) / H).
 
 Normals are always recomputed here from the welded geometry (area-weighted face normals
-summed over every vertex at the same position), never read from the file, so UV-seam twins
+summed over every vertex at the same position), so UV-seam twins
 (same position, different UV) get the same normal in the baker and in restoration (§5:
 "alias information is used to restore smooth model normals").
 
-Tangents are a documented MikkTSpace equivalent: per-face tangent/bitangent from the UV
-gradients, accumulated per vertex with corner-angle weights (as MikkTSpace does),
-Gram-Schmidt orthogonalised against the vertex normal, handedness sign
-``sign = sign(dot(n x t, b))``; a shader rebuilds ``b = sign * cross(n, t)`` per pixel from
-the *interpolated* n and t (MikkTSpace's per-pixel bitangent convention).  It differs from
-MikkTSpace only in that MikkTSpace also splits tangents at degenerate UV corners.
+Tangents are exact MikkTSpace (:mod:`mi_displace.bake.mikktspace`), per face corner.
 """
 from __future__ import annotations
 
@@ -109,21 +104,34 @@ def _lines(fmt: str, rows: np.ndarray) -> str:
 
 
 def save_obj(path: str | os.PathLike, positions, faces, uvs=None, normals=None) -> Path:
-    """Write an OBJ (exact float32 round trip: 9 significant digits) with optional vt / vn."""
+    """Write an OBJ (exact float32 round trip: 9 significant digits) with optional vt / vn.
+
+    Positions are written once each (``v``; UV-seam twins, vertices at the same position
+    with different UVs and equal normals, share one) with UVs per face corner
+    (``f v/vt/vn``), as OBJ allows: Blender and other importers see one connected surface
+    instead of pieces cut at every seam.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    f = np.asarray(faces, np.int64) + 1
-    parts = [_lines("v %.9g %.9g %.9g\n", np.asarray(positions, np.float32))]
+    p = np.asarray(positions, np.float32)
+    faces = np.asarray(faces, np.int64)
+    key = p if normals is None else np.concatenate([p, np.asarray(normals, np.float32)], 1)
+    _, first, shared = np.unique(key + np.float32(0), axis=0, return_index=True, return_inverse=True)
+    shared = shared.ravel()
+    fv, ft = shared[faces] + 1, faces + 1
+    parts = [_lines("v %.9g %.9g %.9g\n", p[first])]
     if uvs is not None:
         parts.append(_lines("vt %.9g %.9g\n", np.asarray(uvs, np.float32)))
     if normals is not None:
-        parts.append(_lines("vn %.6g %.6g %.6g\n", np.asarray(normals, np.float32)))
+        parts.append(_lines("vn %.6g %.6g %.6g\n", np.asarray(normals, np.float32)[first]))
     if uvs is not None and normals is not None:
-        parts.append(_lines("f %d/%d/%d %d/%d/%d %d/%d/%d\n", np.repeat(f, 3, axis=1)))
+        parts.append(_lines("f %d/%d/%d %d/%d/%d %d/%d/%d\n", np.stack([fv, ft, fv], 2).reshape(-1, 9)))
     elif uvs is not None:
-        parts.append(_lines("f %d/%d %d/%d %d/%d\n", np.repeat(f, 2, axis=1)))
+        parts.append(_lines("f %d/%d %d/%d %d/%d\n", np.stack([fv, ft], 2).reshape(-1, 6)))
+    elif normals is not None:
+        parts.append(_lines("f %d//%d %d//%d %d//%d\n", np.stack([fv, fv], 2).reshape(-1, 6)))
     else:
-        parts.append(_lines("f %d %d %d\n", f))
+        parts.append(_lines("f %d %d %d\n", fv))
     path.write_text("".join(parts))
     return path
 
@@ -132,6 +140,15 @@ def weld_ids(positions: np.ndarray) -> np.ndarray:
     """(V,) alias id of every vertex: twins at bit-identical float32 positions share one (§5)."""
     _, inverse = np.unique(np.asarray(positions, np.float32), axis=0, return_inverse=True)
     return inverse.ravel()
+
+
+def edge_counts(faces: np.ndarray, weld: np.ndarray) -> dict:
+    """Boundary (one face) and non-manifold (three or more faces) edges of a mesh, counted on
+    welded vertices (``weld``: (V,) position class), so UV seams are not boundaries."""
+    w = np.asarray(weld, np.int64)[np.asarray(faces, np.int64)]
+    e = np.sort(np.stack([w, np.roll(w, -1, axis=1)], 2).reshape(-1, 2), axis=1)
+    _, count = np.unique(e[:, 0] * (int(w.max()) + 1) + e[:, 1], return_counts=True)
+    return {"boundary_edges": int((count == 1).sum()), "non_manifold_edges": int((count > 2).sum())}
 
 
 def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -145,43 +162,6 @@ def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
     n = acc[weld]
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.where(length > 0, n / np.maximum(length, 1e-300), [0.0, 0.0, 1.0]).astype(np.float32)
-
-
-def tangent_frame(positions, faces, uvs, normals) -> tuple[np.ndarray, np.ndarray]:
-    """MikkTSpace-equivalent per-vertex tangents (V, 3) float32 and handedness signs (V,).
-
-    See the module docstring.  Vertices whose faces all have degenerate UVs get any unit
-    vector orthogonal to their normal and sign +1.
-    """
-    p = np.asarray(positions, np.float64)
-    uv = np.asarray(uvs, np.float64)
-    n = np.asarray(normals, np.float64)
-    tan = np.zeros_like(p)
-    bit = np.zeros_like(p)
-    e1, e2 = p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]]
-    d1, d2 = uv[faces[:, 1]] - uv[faces[:, 0]], uv[faces[:, 2]] - uv[faces[:, 0]]
-    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
-    ok = np.abs(det) > 1e-20
-    r = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
-    t_face = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * r          # dP/du
-    b_face = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * r          # dP/dv
-    for k in range(3):  # corner-angle weights, as MikkTSpace
-        a = p[faces[:, (k + 1) % 3]] - p[faces[:, k]]
-        b = p[faces[:, (k + 2) % 3]] - p[faces[:, k]]
-        cosang = np.einsum("ij,ij->i", a, b) / np.maximum(
-            np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
-        w = np.arccos(np.clip(cosang, -1, 1))[:, None]
-        tn = t_face / np.maximum(np.linalg.norm(t_face, axis=1, keepdims=True), 1e-300)
-        bn = b_face / np.maximum(np.linalg.norm(b_face, axis=1, keepdims=True), 1e-300)
-        np.add.at(tan, faces[:, k], w * tn)
-        np.add.at(bit, faces[:, k], w * bn)
-    t = tan - n * np.einsum("ij,ij->i", n, tan)[:, None]       # Gram-Schmidt against n
-    length = np.linalg.norm(t, axis=1, keepdims=True)
-    fallback = np.cross(n, np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
-    fallback /= np.maximum(np.linalg.norm(fallback, axis=1, keepdims=True), 1e-300)
-    t = np.where(length > 1e-12, t / np.maximum(length, 1e-300), fallback)
-    sign = np.where(np.einsum("ij,ij->i", np.cross(n, t), bit) < 0, -1.0, 1.0)
-    return t.astype(np.float32), sign.astype(np.float32)
 
 
 def uv_triangle_stats(uvs: np.ndarray, faces: np.ndarray) -> dict:

@@ -13,8 +13,12 @@
 3. **Displacement** — P = p + d * dir, d bilinearly sampled from the map at the vertex's UV
    (Dr.Jit texture, clamp), dir the interpolated normal, or for direction formats
    normalize(x t + y b + z n) from the stored tangent-space direction.
-4. **Holes** — faces with at least two of three vertices sampling "void" in the bake's validity mask
-   (no high-poly within reach: a hole of the original) are dropped.
+4. **Holes** — vertices sampling "void" in the bake's validity mask (no high-poly within
+   reach) are counted.  On an *open* low-poly (boundary edges) a void region is a hole of the
+   original: faces with at least two of three void vertices are dropped.  A *closed* low-poly
+   never loses a face: its void vertices keep the map's value there, which the bake's edge
+   padding filled from the nearest measured texel (within the padding radius; beyond it the
+   displacement is 0, i.e. the low-poly position), so the restored mesh stays closed.
 5. **Normals** — area-weighted normals of the displaced faces summed over alias classes.
 """
 from __future__ import annotations
@@ -28,7 +32,8 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.bake import formats
-from mi_displace.bake.meshdata import MeshData, load_mesh, save_obj, tangent_frame, weld_ids
+from mi_displace.bake.meshdata import MeshData, edge_counts, load_mesh, save_obj, weld_ids
+from mi_displace.bake.mikktspace import mikktspace, vertex_tangents
 from mi_displace.core.tessellate import (MAX_VERTICES, face_weighted_normals, gather,
                                          scatter_add, subdivision_topology)
 
@@ -45,6 +50,8 @@ class Restored:
     normals: np.ndarray
     uvs: np.ndarray
     seconds: float
+    report: dict   # closed, boundary/non-manifold edges, void vertices, dropped faces, holes rule
+    state: "DisplaceState" = None   # what re-displaces the mesh from an edited map (Dr.Jit, AD)
 
     def save(self, path: str | os.PathLike) -> None:
         """Write as OBJ or PLY (by suffix)."""
@@ -58,6 +65,44 @@ class Restored:
             save_obj(path, self.positions, self.faces, self.uvs, self.normals)
         else:
             raise ValueError(f"out: restored mesh must be .ply or .obj, got {path!r}")
+
+
+@dataclass
+class DisplaceState:
+    """Step 3 as a function of the map: the subdivided low-poly (Dr.Jit, N vertices, G alias
+    classes) and what turns a displacement tensor (H, W, 1) [object units] into positions,
+    differentiably (the ``restored`` shape's map texels are optimisable through it).
+
+    ``fixed`` (G,) marks alias classes whose offset is not read from the map (void vertices of
+    a closed low-poly, filled from their neighbours: ``fixed_offset``, constant).
+    """
+
+    p: mi.Point3f                 # (N,) undisplaced subdivided positions
+    direction: mi.Vector3f        # (N,) unit displacement directions
+    lookup: mi.Point2f            # (N,) texture lookup (u, 1 - v)
+    groups: mi.UInt32             # (N,) alias class
+    count: mi.Float               # (G,) members per class
+    n_groups: int
+    fixed: mi.Bool = False
+    fixed_offset: mi.Vector3f = None
+    faces: mi.Vector3u = None
+    normals: mi.Vector3f = None   # (N,) interpolated low-poly normals (normal fallback)
+
+    def offsets(self, displacement: mi.TensorXf) -> mi.Vector3f:
+        """(G,) mean displacement vector of each alias class, bilinear from the map."""
+        tex = mi.Texture2f(displacement, filter_mode=dr.FilterMode.Linear,
+                           wrap_mode=dr.WrapMode.Clamp, use_accel=False)
+        d = tex.eval(self.lookup)[0]
+        total = dr.zeros(mi.Vector3f, self.n_groups)   # alias buffer: one displacement per class
+        scatter_add(total, d * self.direction, self.groups)
+        return total / self.count
+
+    def displace(self, displacement: mi.TensorXf) -> tuple[mi.Point3f, mi.Vector3f]:
+        """Positions (N,) and area-weighted normals (N,) of the mesh displaced by the map."""
+        off = dr.select(self.fixed, self.fixed_offset, self.offsets(displacement)) \
+            if self.fixed_offset is not None else self.offsets(displacement)
+        p = self.p + gather(mi.Vector3f, off, self.groups)
+        return p, face_weighted_normals(p, self.faces, self.groups, self.n_groups, self.normals)
 
 
 def edge_splits(levels: int | None, split: int | None) -> int:
@@ -88,8 +133,9 @@ def restore(low, displacement_map, levels: int | None = 2, split: int | None = N
             :func:`formats.read_map` (``displacement`` (H, W) [object units], optional
             ``direction_tangent`` (H, W, 3)).
         levels, split: subdivision (see :func:`edge_splits`).
-        keep_holes: drop faces with two or three vertices over texels where the bake found no
-            high-poly (the map's validity mask ``valid.png``): holes of the original stay open.
+        keep_holes: on an open low-poly, drop faces with two or three vertices over texels
+            where the bake found no high-poly (the map's validity mask ``valid.png``): holes
+            of the original stay open.  A closed low-poly never loses a face (step 4 above).
     """
     L = edge_splits(levels, split)
     low = low if isinstance(low, MeshData) else load_mesh(low, "low-poly")
@@ -134,37 +180,78 @@ def restore(low, displacement_map, levels: int | None = 2, split: int | None = N
     n = dr.normalize(n_raw)
     uv = mi.Point2f(interp(mi.Vector2f, low.uvs))
     lookup = mi.Point2f(uv.x, 1.0 - uv.y)          # image row 0 holds v = 1
-    d = _texture(disp).eval(lookup)[0]
     direction = n
     if dirs is not None:
-        t_v, s_v = tangent_frame(low.positions, low.faces, low.uvs, normals)
+        t_v, s_v = vertex_tangents(low.faces, *mikktspace(low.positions, low.faces, normals, low.uvs),
+                                   len(low.positions))
         t = interp(mi.Vector3f, t_v)
         b = dr.sign(interp(mi.Vector2f, np.stack([s_v, s_v], 1)).x) * dr.cross(n_raw, t)
         x = _texture(dirs).eval(lookup)
         direction = dr.normalize(x[0] * t + x[1] * b + x[2] * n_raw)
     groups = mi.UInt32(group)
     n_groups = int(group.max()) + 1
-    total = dr.zeros(mi.Vector3f, n_groups)        # alias buffer: one displacement per class
     count = dr.zeros(mi.Float, n_groups)
-    scatter_add(total, d * direction, groups)
     dr.scatter_add(count, 1.0, groups)
-    p = p + gather(mi.Vector3f, total, groups) / dr.gather(mi.Float, count, groups)
-    if decoded.get("valid") is not None and keep_holes:
-        # vertices over texels where the bake found no high-poly; drop faces made only of them
+    state = DisplaceState(p, direction, lookup, groups, count, n_groups)
+    offset = np.stack([np.asarray(c) for c in state.offsets(
+        mi.TensorXf(np.ascontiguousarray(disp[:, :, None], np.float32)))], 1)     # (G, 3)
+    edges = edge_counts(low.faces, weld)
+    report = {"closed": edges["boundary_edges"] == 0, **edges, "void_vertices": 0,
+              "dropped_faces": 0, "holes": "no validity mask"}
+    if decoded.get("valid") is not None:
+        # alias classes over texels where the bake found no high-poly
         vsum = dr.zeros(mi.Float, n_groups)
         dr.scatter_add(vsum, _texture(decoded["valid"]).eval(lookup)[0], groups)
-        void = np.asarray(dr.gather(mi.Float, vsum, groups) / dr.gather(mi.Float, count, groups)) < 0.5
-        new_faces = new_faces[void[new_faces].sum(1) < VOID_CORNERS]
-        if len(new_faces) == 0:
-            raise ValueError("map: its validity mask marks every texel as void (nothing to restore)")
-    f = mi.Vector3u(*[mi.UInt32(new_faces[:, k]) for k in range(3)])
-    nrm = face_weighted_normals(p, f, groups, n_groups, n)
+        void_g = np.asarray(vsum) / np.asarray(count) < 0.5
+        void = void_g[group]
+        report["void_vertices"] = int(void.sum())
+        if report["closed"] or not keep_holes:
+            offset = _fill_from_neighbours(offset, void_g, group[new_faces])
+            state.fixed = mi.Bool(void_g)
+            state.fixed_offset = mi.Vector3f(*[mi.Float(np.ascontiguousarray(offset[:, k], np.float32))
+                                               for k in range(3)])
+            report["holes"] = ("kept and filled: void vertices take the harmonic interpolation of "
+                               "their measured neighbours' displacement (none: the low-poly position)")
+        else:   # open low-poly: drop faces made mostly of void vertices (holes of the original)
+            keep = void[new_faces].sum(1) < VOID_CORNERS
+            report["dropped_faces"] = int((~keep).sum())
+            report["holes"] = "dropped: faces with 2 or 3 void vertices (open low-poly)"
+            new_faces = new_faces[keep]
+            if len(new_faces) == 0:
+                raise ValueError("map: its validity mask marks every texel as void (nothing to restore)")
+    state.faces = mi.Vector3u(*[mi.UInt32(new_faces[:, k]) for k in range(3)])
+    state.normals = n
+    p, nrm = state.displace(mi.TensorXf(np.ascontiguousarray(disp[:, :, None], np.float32)))
     dr.eval(p, nrm, uv)
     out = Restored(np.stack([np.asarray(c) for c in p], 1), new_faces,
                    np.stack([np.asarray(c) for c in nrm], 1), np.stack([np.asarray(c) for c in uv], 1),
-                   time.perf_counter() - start)
+                   time.perf_counter() - start, report, state)
     if not (np.all(np.isfinite(out.positions)) and np.all(np.isfinite(out.normals))):
         raise ValueError("restore: the restored mesh has NaN/Inf vertices (check the map)")
+    return out
+
+
+def _fill_from_neighbours(offset: np.ndarray, void: np.ndarray, group_faces: np.ndarray) -> np.ndarray:
+    """Displacement vectors (G, 3) of the ``void`` alias classes replaced by the harmonic
+    interpolation of the measured ones around them (the graph Laplacian of the restored mesh's
+    edges solved over the void classes, SciPy sparse; a void region with no measured class
+    around it stays at the low-poly position)."""
+    if not void.any():
+        return offset
+    from scipy.sparse import coo_matrix, diags
+    from scipy.sparse.linalg import spsolve
+
+    G = len(offset)
+    a, b = group_faces.ravel(), np.roll(group_faces, -1, axis=1).ravel()
+    adj = coo_matrix((np.ones(2 * len(a)), (np.r_[a, b], np.r_[b, a])), shape=(G, G)).tocsr()
+    adj.data[:] = 1.0                                    # an edge shared by two faces counts once
+    lap = diags(np.asarray(adj.sum(1)).ravel()) - adj
+    v, k = np.flatnonzero(void), np.flatnonzero(~void)
+    # a tiny pull towards 0 keeps void regions without measured neighbours solvable (they stay 0)
+    system = (lap[v][:, v] + 1e-9 * diags(np.ones(len(v)))).tocsc()
+    rhs = -(lap[v][:, k] @ offset[k])
+    out = offset.copy()
+    out[v] = np.asarray(spsolve(system, rhs)).reshape(len(v), 3)
     return out
 
 

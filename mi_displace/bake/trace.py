@@ -37,7 +37,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.bake.meshdata import MeshData
+from mi_displace.bake.meshdata import MeshData, weld_ids
 from mi_displace.core.tessellate import gather as _gather_all
 
 # Per-sample status, ordered so that the largest code is the worst (texel status = max).
@@ -64,11 +64,17 @@ class HighPoly:
     """The high-poly in a Mitsuba scene (its BVH) plus face and vertex normals on the device."""
 
     def __init__(self, high: MeshData):
-        V, F = len(high.positions), len(high.faces)
+        # welded by position: a textured high-poly (vertices split at its UV seams) gets one
+        # normal per position, so its normal map does not crease along its own seams
+        weld = weld_ids(high.positions)
+        V, F = int(weld.max()) + 1, len(high.faces)
+        positions = np.zeros((V, 3), np.float32)
+        positions[weld] = high.positions
+        faces = weld[high.faces].astype(np.uint32)
         mesh = mi.Mesh("high_poly", V, F, has_vertex_normals=True, has_vertex_texcoords=False)
         params = mi.traverse(mesh)
-        params["vertex_positions"] = mi.Float(np.ascontiguousarray(high.positions.ravel()))
-        params["faces"] = mi.UInt32(np.ascontiguousarray(high.faces.astype(np.uint32).ravel()))
+        params["vertex_positions"] = mi.Float(np.ascontiguousarray(positions.ravel()))
+        params["faces"] = mi.UInt32(np.ascontiguousarray(faces.ravel()))
         params.update()
         mesh.recompute_vertex_normals()   # Mitsuba's own (area/angle-weighted), on the device
         self.scene = mi.load_dict({"type": "scene", "high": mesh})
@@ -78,7 +84,7 @@ class HighPoly:
         vn = mi.traverse(mesh)["vertex_normals"]
         self.vertex_normals = mi.Vector3f(*(dr.gather(mi.Float, vn, dr.arange(mi.UInt32, V) * 3 + k)
                                             for k in range(3)))
-        self.faces = mi.Vector3u(*[mi.UInt32(high.faces[:, k].astype(np.uint32)) for k in range(3)])
+        self.faces = mi.Vector3u(*[mi.UInt32(np.ascontiguousarray(faces[:, k])) for k in range(3)])
 
     def shading_normal(self, prim: mi.UInt32, b1: mi.Float, b2: mi.Float,
                        active: mi.Bool) -> mi.Vector3f:
@@ -99,25 +105,28 @@ class LowPolyDevice:
 
     def __init__(self, low: MeshData, normals: np.ndarray, tangents: np.ndarray,
                  signs: np.ndarray, cage: np.ndarray | None = None):
+        """``tangents`` (F, 3, 3) and ``signs`` (F, 3): per face corner (MikkTSpace)."""
         self.faces = [mi.UInt32(low.faces[:, k].astype(np.uint32)) for k in range(3)]
         self.p = _vec(low.positions, mi.Point3f)
         self.n = _vec(normals)
-        self.t = _vec(tangents)
-        self.sign = mi.Float(np.asarray(signs, np.float32))
+        self.t = _vec(np.asarray(tangents, np.float32).reshape(-1, 3))
+        self.sign = mi.Float(np.asarray(signs, np.float32).ravel())
         self.cage = None if cage is None else _vec(cage, mi.Point3f)
 
     def interpolate(self, prim, b1, b2):
         """p, unnormalised n and t, per-pixel bitangent sign*(n x t) and the cage point q."""
         f = [dr.gather(mi.UInt32, self.faces[k], prim) for k in range(3)]
+        corner = [prim * 3 + k for k in range(3)]
         w = (1.0 - b1 - b2, b1, b2)
 
-        def lerp(cls, arr):
-            return sum((gather(cls, arr, f[k]) * w[k] for k in (1, 2)), gather(cls, arr, f[0]) * w[0])
+        def lerp(cls, arr, index):
+            return sum((gather(cls, arr, index[k]) * w[k] for k in (1, 2)), gather(cls, arr, index[0]) * w[0])
 
-        p, n, t = lerp(mi.Point3f, self.p), lerp(mi.Vector3f, self.n), lerp(mi.Vector3f, self.t)
-        s = dr.sign(sum((dr.gather(mi.Float, self.sign, f[k]) * w[k] for k in (1, 2)),
-                        dr.gather(mi.Float, self.sign, f[0]) * w[0]))
-        q = None if self.cage is None else lerp(mi.Point3f, self.cage)
+        p, n = lerp(mi.Point3f, self.p, f), lerp(mi.Vector3f, self.n, f)
+        t = lerp(mi.Vector3f, self.t, corner)
+        s = dr.sign(sum((dr.gather(mi.Float, self.sign, corner[k]) * w[k] for k in (1, 2)),
+                        dr.gather(mi.Float, self.sign, corner[0]) * w[0]))
+        q = None if self.cage is None else lerp(mi.Point3f, self.cage, f)
         return p, n, t, s * dr.cross(n, t), q
 
 

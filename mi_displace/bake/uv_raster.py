@@ -83,17 +83,25 @@ def _cast(layout: UVLayout, u: mi.Float, v: mi.Float, up: bool = False):
 
 def rasterize_rows(layout: UVLayout, width: int, height: int, row0: int, rows: int,
                    aa: int = 1, conservative: bool = True) -> Samples:
-    """Samples of texel rows [row0, row0 + rows) of a width x height map, aa x aa per texel."""
+    """Samples of texel rows [row0, row0 + rows) of a width x height map, aa x aa per texel.
+
+    The sizes enter the kernels as opaque values, not literals: one set of kernels serves
+    every block, resolution and aa (a first bake compiles them once, later ones reuse them).
+    """
     n_tex = rows * width
-    s = aa * aa
-    idx = dr.arange(mi.UInt32, n_tex * s)
-    texel, sub = idx // s, idx % s
-    col, row = texel % width, texel // width + row0
-    u = (mi.Float(col) + (mi.Float(sub % aa) + 0.5) / aa) / width
-    v = 1.0 - (mi.Float(row) + (mi.Float(sub // aa) + 0.5) / aa) / height
+    n_samples = n_tex * aa * aa
+    W, H = dr.opaque(mi.UInt32, width), dr.opaque(mi.Float, height)
+    A, R0, ROWS = dr.opaque(mi.UInt32, aa), dr.opaque(mi.UInt32, row0), dr.opaque(mi.Int32, rows)
+    Wf, Af = mi.Float(W), mi.Float(A)
+    idx = dr.arange(mi.UInt32, n_samples)
+    texel, sub = idx // (A * A), idx % (A * A)
+    col, row = texel % W, texel // W + R0
+    u = (mi.Float(col) + (mi.Float(sub % A) + 0.5) / Af) / Wf
+    v = 1.0 - (mi.Float(row) + (mi.Float(sub // A) + 0.5) / Af) / H
     pi = _cast(layout, u, v)
     hit = dr.compress(pi.is_valid())
-    texel_h = dr.gather(mi.UInt32, texel, hit)
+    # = texel[hit] (a gather from the counter would bake its size into the kernel)
+    texel_h = hit // (A * A) if dr.width(hit) else dr.zeros(mi.UInt32, 0)
     prim = dr.gather(mi.UInt32, pi.prim_index, hit)
     b1 = dr.gather(mi.Float, pi.prim_uv.x, hit)
     b2 = dr.gather(mi.Float, pi.prim_uv.y, hit)
@@ -103,23 +111,24 @@ def rasterize_rows(layout: UVLayout, width: int, height: int, row0: int, rows: i
         if dr.width(texel_h):
             dr.scatter(covered, 1, texel_h)
         t = dr.arange(mi.UInt32, n_tex)
-        c, r = mi.Int32(t % width), mi.Int32(t // width)
+        Wi = mi.Int32(W)
+        c, r = mi.Int32(t % W), mi.Int32(t // W)
         near = mi.Bool(False)
         for dc in (-1, 0, 1):
             for dv in (-1, 0, 1):
                 cc, rr = c + dc, r + dv
-                ok = (cc >= 0) & (cc < width) & (rr >= 0) & (rr < rows) & ((dc != 0) | (dv != 0))
-                near |= ok & (dr.gather(mi.UInt32, covered, mi.UInt32(rr * width + cc), ok) > 0)
+                ok = (cc >= 0) & (cc < Wi) & (rr >= 0) & (rr < ROWS) & ((dc != 0) | (dv != 0))
+                near |= ok & (dr.gather(mi.UInt32, covered, mi.UInt32(rr * Wi + cc), ok) > 0)
         band = dr.compress(near & (covered == 0))
         if dr.width(band):
-            bc = mi.Float(dr.gather(mi.UInt32, t, band) % width)
-            br = mi.Float(dr.gather(mi.UInt32, t, band) // width + row0)
+            bc = mi.Float(band % W)     # band indexes the counter t directly
+            br = mi.Float(band // W + R0)
             found = dr.zeros(mi.Bool, dr.width(band))
             tri = dr.zeros(mi.UInt32, dr.width(band))
             for fx, fy in ((0, 0), (1, 0), (0, 1), (1, 1)):  # the four corners
                 ox = CORNER_INSET + fx * (1 - 2 * CORNER_INSET)
                 oy = CORNER_INSET + fy * (1 - 2 * CORNER_INSET)
-                pc = _cast(layout, (bc + ox) / width, 1.0 - (br + oy) / height)
+                pc = _cast(layout, (bc + ox) / Wf, 1.0 - (br + oy) / H)
                 take = pc.is_valid() & ~found
                 tri = dr.select(take, pc.prim_index, tri)
                 found |= take
@@ -127,13 +136,21 @@ def rasterize_rows(layout: UVLayout, width: int, height: int, row0: int, rows: i
             added = dr.width(keep)
         if added:  # band texels whose corner probes found a triangle
             tri = dr.gather(mi.UInt32, tri, keep)
-            centre = mi.Point2f((dr.gather(mi.Float, bc, keep) + 0.5) / width,
-                                1.0 - (dr.gather(mi.Float, br, keep) + 0.5) / height)
+            centre = mi.Point2f((dr.gather(mi.Float, bc, keep) + 0.5) / Wf,
+                                1.0 - (dr.gather(mi.Float, br, keep) + 0.5) / H)
             cb1, cb2 = _clamped_barycentrics(layout, tri, centre)
-            texel_h = dr.concat([texel_h, dr.gather(mi.UInt32, band, keep)])
-            prim = dr.concat([prim, tri])
-            b1, b2 = dr.concat([b1, cb1]), dr.concat([b2, cb2])
+            texel_h = _append(texel_h, dr.gather(mi.UInt32, band, keep))
+            prim = _append(prim, tri)
+            b1, b2 = _append(b1, cb1), _append(b2, cb2)
     return Samples(texel_h, prim, b1, b2, int(added))
+
+
+def _append(a, b):
+    """a followed by b (dr.concat would bake len(a) into the kernel as a literal)."""
+    out = dr.empty(type(a), dr.width(a) + dr.width(b))
+    dr.scatter(out, a, dr.arange(mi.UInt32, dr.width(a)))
+    dr.scatter(out, b, dr.arange(mi.UInt32, dr.width(b)) + dr.opaque(mi.UInt32, dr.width(a)))
+    return out
 
 
 def _clamped_barycentrics(layout: UVLayout, tri: mi.UInt32, p: mi.Point2f):

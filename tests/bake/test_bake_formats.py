@@ -18,23 +18,54 @@ def _maps(h=16, w=24, seed=0):
             "direction_tangent": unit(0.5), "back_depth": (d - 0.2).astype(np.float32)}
 
 
-@pytest.mark.parametrize("fmt", sorted(formats.FORMATS))
-def test_round_trip(tmp_path, variant, fmt):
+#: displacement bits of each quantised format (the §1.2 table), independent of the sidecar
+BITS = {"d8": 8, "d16": 16, "dir24_d8": 8, "dir16_d16": 16, "d8_n24": 8, "dual_d8_n16": 8,
+        "d16_n16": 16}
+
+
+def check_round_trip(tmp_path, fmt):
+    """Write and read ``fmt``; displacement within half of the step the format's bit depth
+    gives over the input's own range (not the step the sidecar claims)."""
     maps = _maps()
     path = formats.write_map(tmp_path, fmt, maps, {"low": "low.obj"})
     meta = json.loads((tmp_path / (path.name + ".json")).read_text())
     assert meta["format"] == fmt and meta["width"] == 24 and meta["height"] == 16
     out = formats.read_map(path)
     if out["displacement"] is not None:
-        step = meta["displacement"]["scale"] if meta["displacement"]["bits"] < 32 else 0.0
-        err = np.abs(out["displacement"] - maps["displacement"]).max()
+        d = maps["displacement"]
+        lo = min(d.min(), maps["back_depth"].min()) if fmt == "dual_d8_n16" else d.min()
+        step = (d.max() - lo) / ((1 << BITS[fmt]) - 1) if fmt in BITS else 0.0
+        err = np.abs(out["displacement"] - d).max()
         assert err <= 0.5 * step + 1e-6, (fmt, err, step)
         assert np.all(np.isfinite(out["displacement"]))
     one_byte = 2.0 / 255  # one 8-bit step of a [-1, 1] component
     for key in ("normal_tangent", "direction_tangent", "back_depth", "normal_object"):
         if out.get(key) is not None:
-            tol = 1e-6 if fmt == "float" else (3 * one_byte if key != "back_depth" else 0.5 * meta["displacement"]["scale"] + 1e-6)
+            tol = 1e-6 if fmt == "float" else (3 * one_byte if key != "back_depth" else 0.5 * step + 1e-6)
             assert np.abs(out[key] - maps[key]).max() <= tol, (fmt, key)
+
+
+@pytest.mark.parametrize("fmt", sorted(formats.FORMATS))
+def test_round_trip(tmp_path, variant, fmt):
+    check_round_trip(tmp_path, fmt)
+
+
+def png_header(path):
+    """(bit depth, colour type) from a PNG's IHDR chunk, read from the bytes."""
+    data = open(path, "rb").read(32)
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and data[12:16] == b"IHDR"
+    return data[24], data[25]
+
+
+def check_d16_is_16_bit(tmp_path):
+    path = formats.write_map(tmp_path, "d16", _maps(64, 64), {})
+    assert png_header(path) == (16, 0)                       # 16-bit greyscale
+    q = formats.read_png_raw(path)
+    assert q.dtype == np.uint16 and len(np.unique(q)) > 1000  # more levels than 8 bits hold
+
+
+def test_d16_png_is_16_bit(tmp_path, variant):
+    check_d16_is_16_bit(tmp_path)
 
 
 def test_formats_carry_what_they_promise(tmp_path, variant):

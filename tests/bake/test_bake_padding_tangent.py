@@ -4,7 +4,7 @@ import pytest
 from conftest import plane
 
 from mi_displace.bake.baker import bake
-from mi_displace.bake.meshdata import MeshData, tangent_frame
+from mi_displace.bake.meshdata import MeshData
 from mi_displace.bake.padding import pad
 
 
@@ -26,16 +26,6 @@ def test_padding_takes_a_nearest_covered_value():
     assert np.all(out[covered] == image[covered])
     with pytest.raises(ValueError, match="padding"):
         pad(image, covered, -1)
-
-
-def test_tangent_frame_and_handedness():
-    lo = plane(n=2)
-    n = np.tile([0.0, 0.0, 1.0], (len(lo.positions), 1))
-    t, s = tangent_frame(lo.positions, lo.faces, lo.uvs, n)
-    assert np.allclose(t, [1, 0, 0]) and np.all(s == 1)
-    mirrored = lo.uvs * [-1, 1]
-    t, s = tangent_frame(lo.positions, lo.faces, mirrored, n)
-    assert np.allclose(t, [-1, 0, 0]) and np.all(s == -1)    # b = s (n x t) stays +y
 
 
 @pytest.mark.parametrize("mirror", [False, True])

@@ -3,7 +3,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import plane
+from conftest import AMPLITUDE, plane, sphere_height
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.meshdata import weld_ids
@@ -74,6 +74,16 @@ def test_bad_restore_input(tmp_path, variant):
         restore(plane(), tmp_path / "none.png")
 
 
+def check_sphere_restoration(positions):
+    """Restored vertices at radius 1 + A f(direction), the known function of the sphere pair
+    (a restoration at 0.5 or 1.5 times the amplitude is 0.25 A RMS off)."""
+    radius = np.linalg.norm(positions, axis=1)
+    err = np.abs(radius - (1.0 + AMPLITUDE * sphere_height(positions)))
+    assert np.all(np.isfinite(positions))
+    assert np.sqrt(np.mean(err ** 2)) < 0.05 * AMPLITUDE and err.max() < 0.2 * AMPLITUDE, \
+        (np.sqrt(np.mean(err ** 2)) / AMPLITUDE, err.max() / AMPLITUDE)
+
+
 def test_cli_bake_restore_meshdiff(sphere_pair, tmp_path, capsys):
     from mi_displace.bake.meshdata import save_obj
 
@@ -95,6 +105,9 @@ def test_cli_bake_restore_meshdiff(sphere_pair, tmp_path, capsys):
     for key in ("rms", "hausdorff", "rms_rel", "hausdorff_rel", "hausdorff_ab", "hausdorff_ba"):
         assert np.isfinite(d[key])
     assert d["hausdorff_rel"] < 0.01
+    import trimesh
+
+    check_sphere_restoration(np.asarray(trimesh.load(tmp_path / "r.ply", process=False).vertices))
     with pytest.raises(SystemExit) as e:
         main(["restore", "--map", str(tmp_path / "b" / "nothing.png"), "--out", str(tmp_path / "x.ply")])
     assert e.value.code == 2
