@@ -47,7 +47,13 @@ class Restored(mi.Mesh):
         if "map" not in props:
             raise ValueError("restored: needs a 'map' (a baked map with its .json sidecar)")
         # sensors referenced for levels="auto" (Mitsuba's Shape would take one as its own child)
-        keys = [k for k in props.keys() if isinstance(props.get(k), mi.Sensor)]
+        # (look without marking the other properties as used: typos must stay unreferenced)
+        keys = []
+        for k in props.keys():
+            queried = props.was_queried(k)
+            if isinstance(props[k], mi.Sensor):
+                keys.append(k)
+            props.mark_queried(k, queried)
         self.sensors = [props.get(k) for k in keys]
         for k in keys:
             del props[k]
@@ -58,7 +64,7 @@ class Restored(mi.Mesh):
         self.auto = isinstance(levels, str) and levels.strip() == "auto"
         if isinstance(levels, str) and not self.auto:
             if not levels.strip().isdigit():
-                raise ValueError(f"restored: levels must be an integer or 'auto', got {levels!r}")
+                raise ValueError(f"restored: 'levels' must be an integer or 'auto', got {levels!r}")
             levels = int(levels)
         self.split = props.get("split", None)
         self.dicing_rate = float(props.get("dicing_rate", 1.0))
