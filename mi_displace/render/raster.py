@@ -11,6 +11,12 @@ do not illuminate (they are not delta lights).  Shadow rays are blocked by every
 null BSDFs included, exactly as the emitter sampling of Mitsuba's ``path``; a technique's
 BSDF can add its own shadow test inside ``eval`` (VDM does).
 
+Shadow rays and alpha-test continuations leave the surface by :func:`spawn_offset`, a
+float32 error bound of the hit point (a fixed number of ulps of the hit triangle's largest
+coordinate), not Mitsuba's ``(1 + max|p|) x RayEpsilon``: that offset is absolute near
+the origin and grows with the distance from it, so small or distant models lost their
+contact shadows (issue 12 item 8, measured in ``docs/raster.md``).
+
 Nothing is random: two renders are bit-identical.
 """
 from __future__ import annotations
@@ -25,6 +31,47 @@ def _is_delta(emitter: mi.Emitter) -> bool:
 
 def _is_ambient(emitter: mi.Emitter) -> bool:
     return emitter.class_name() == "ConstantBackgroundEmitter"
+
+
+#: Half-ulps (2^-24 relative) of the hit triangle's largest coordinate by which a secondary
+#: ray's origin leaves the surface along the geometric normal.  Barycentric interpolation of
+#: float32 vertices is exact to a few half-ulps; on the thorn sphere acne appears below 8 and
+#: contact shadows of a model 1000 units from the origin shrink above ~32 (docs/raster.md).
+SPAWN_HALF_ULPS = 32
+
+
+def spawn_offset(si: mi.SurfaceInteraction3f, d: mi.Vector3f,
+                 active: mi.Bool = True) -> mi.Point3f:
+    """Origin of a ray leaving ``si`` toward ``d``: ``si.p`` moved off the surface along the
+    geometric normal (to the side of ``d``) by ``SPAWN_HALF_ULPS`` x 2^-24 x the largest
+    absolute coordinate of the hit point and, on meshes, of the hit triangle's vertices.
+
+    Scale invariant: a model scaled by k gets an offset scaled by k, anywhere in space.
+    """
+    active = mi.Bool(active)
+    scale = dr.max(dr.abs(si.p))
+    on_mesh = active & si.is_valid() & si.shape.is_mesh()
+    mesh = mi.MeshPtr(si.shape)
+    face = mesh.face_indices(si.prim_index, on_mesh)
+    for k in range(3):
+        vertex = mesh.vertex_position(face[k], on_mesh)
+        scale = dr.select(on_mesh, dr.maximum(scale, dr.max(dr.abs(vertex))), scale)
+    n = dr.mulsign(mi.Vector3f(si.n), dr.dot(si.n, d))
+    return si.p + n * (scale * (SPAWN_HALF_ULPS * 2.0**-24))
+
+
+def spawn_ray(si: mi.SurfaceInteraction3f, d: mi.Vector3f, active: mi.Bool = True) -> mi.Ray3f:
+    """A ray from ``si`` along ``d`` (unbounded), origin by :func:`spawn_offset`."""
+    return mi.Ray3f(spawn_offset(si, d, active), d, si.time, si.wavelengths)
+
+
+def spawn_ray_to(si: mi.SurfaceInteraction3f, target: mi.Point3f,
+                 active: mi.Bool = True) -> mi.Ray3f:
+    """A shadow ray from ``si`` to ``target`` ending ``ShadowEpsilon`` (relative) short of it."""
+    o = spawn_offset(si, target - si.p, active)
+    ray = mi.Ray3f(o, target - o, si.time, si.wavelengths)
+    ray.maxt = 1.0 - mi.math.ShadowEpsilon
+    return ray
 
 
 def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int,
@@ -45,7 +92,7 @@ def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int,
         bsdf = si.bsdf(ray)
         null = dr.mean(bsdf.eval_null_transmission(si, going & si.is_valid()), axis=0)
         passes = going & si.is_valid() & (null >= 0.5) & (layer + 1 < max_layers)
-        ray = dr.select(passes, si.spawn_ray(ray.d), ray)
+        ray = dr.select(passes, spawn_ray(si, ray.d, passes), ray)
         return ray, layer + 1, passes
 
     ray, _, _ = dr.while_loop(state=(mi.Ray3f(ray), mi.UInt32(0), mi.Bool(active)),
@@ -70,7 +117,7 @@ def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8,
         if _is_delta(e):
             ds, weight = e.sample_direction(si, mi.Point2f(0.5), hit)
             lit = hit & (ds.pdf > 0)
-            lit &= ~scene.ray_test(si.spawn_ray_to(ds.p), lit)
+            lit &= ~scene.ray_test(spawn_ray_to(si, ds.p, lit), lit)
             f = bsdf.eval(ctx, si, si.to_local(ds.d), lit)
             L += dr.select(lit, f * weight, 0.0)
         elif _is_ambient(e):
