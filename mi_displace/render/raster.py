@@ -21,8 +21,15 @@ Nothing is random: two renders are bit-identical.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import drjit as dr
 import mitsuba as mi
+
+from mi_displace.render import shadow_map, zbuffer
+
+VISIBILITY = ("raytrace", "zbuffer")
+SHADOWS = ("ray", "map", "none")
 
 
 def _is_delta(emitter: mi.Emitter) -> bool:
@@ -101,11 +108,47 @@ def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int,
     return scene.ray_intersect(ray, active), ray
 
 
-def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8,
-          active: mi.Bool = True) -> mi.Color3f:
-    """Radiance [scene units] along primary rays under local illumination (module doc)."""
-    active = mi.Bool(active)
-    si, ray = first_opaque_hit(scene, ray, max_layers, active)
+@dataclass
+class Options:
+    """How `raster` finds what a pixel sees and what a light sees.
+
+    Attributes:
+        visibility: ``"raytrace"`` (one ray per sample through Mitsuba's acceleration
+            structure) or ``"zbuffer"`` (triangles rasterised, :mod:`.zbuffer`).
+        shadows: ``"ray"`` (a hard shadow ray per delta light), ``"map"`` (shadow maps,
+            :mod:`.shadow_map`) or ``"none"`` (delta lights unshadowed).
+        shadow_resolution: shadow-map texels per side (cube faces for point lights).
+        shadow_bias, shadow_slope_bias: shadow-map bias, in texels (constant and x tan).
+    """
+    visibility: str = "raytrace"
+    shadows: str = "ray"
+    shadow_resolution: int = 2048
+    shadow_bias: float = 1.0
+    shadow_slope_bias: float = 1.0
+
+    def check(self) -> "Options":
+        """Raises ValueError naming the first bad field."""
+        if self.visibility not in VISIBILITY:
+            raise ValueError(f"raster: 'visibility' must be one of {VISIBILITY}, "
+                             f"got {self.visibility!r}")
+        if self.shadows not in SHADOWS:
+            raise ValueError(f"raster: 'shadows' must be one of {SHADOWS}, got {self.shadows!r}")
+        if not (isinstance(self.shadow_resolution, int) and 1 <= self.shadow_resolution <= 16384):
+            raise ValueError(f"raster: 'shadow_resolution' must be an integer in [1, 16384], "
+                             f"got {self.shadow_resolution!r}")
+        for name in ("shadow_bias", "shadow_slope_bias"):
+            value = getattr(self, name)
+            if not (value >= 0 and value < float("inf")):
+                raise ValueError(f"raster: {name!r} must be finite and >= 0, got {value!r}")
+        return self
+
+
+def shade_hit(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f, active: mi.Bool,
+              shadow_test) -> mi.Color3f:
+    """Local illumination of the visible interactions ``si`` (module doc).
+
+    ``shadow_test(emitter, si, ds, lit) -> Bool`` says which points see a delta light.
+    """
     hit = active & si.is_valid()
     L = dr.zeros(mi.Color3f, dr.width(ray.d))
     # Directly visible emitters: area lights on the hit, the environment on a miss.
@@ -117,7 +160,7 @@ def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8,
         if _is_delta(e):
             ds, weight = e.sample_direction(si, mi.Point2f(0.5), hit)
             lit = hit & (ds.pdf > 0)
-            lit &= ~scene.ray_test(spawn_ray_to(si, ds.p, lit), lit)
+            lit &= shadow_test(e, si, ds, lit)
             f = bsdf.eval(ctx, si, si.to_local(ds.d), lit)
             L += dr.select(lit, f * weight, 0.0)
         elif _is_ambient(e):
@@ -126,31 +169,127 @@ def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8,
     return L
 
 
+def ray_shadows(scene: mi.Scene):
+    """Shadow test by one shadow ray per light through the scene's acceleration structure."""
+    def test(emitter, si, ds, lit):
+        return ~scene.ray_test(spawn_ray_to(si, ds.p, lit), lit)
+    return test
+
+
+def map_shadows(scene: mi.Scene, geom: zbuffer.Geometry, options: Options):
+    """Shadow test by a shadow map per delta light (built here, once per render)."""
+    maps = {}
+    for e in scene.emitters():
+        if _is_delta(e):
+            maps[id(e)] = shadow_map.build(e, geom, options.shadow_resolution,
+                                           options.shadow_bias, options.shadow_slope_bias)
+
+    def test(emitter, si, ds, lit):
+        return shadow_map.unshadowed(maps[id(emitter)], si, ds.d, lit)
+    return test
+
+
+def no_shadows(emitter, si, ds, lit):
+    return mi.Bool(True)
+
+
+def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8,
+          active: mi.Bool = True) -> mi.Color3f:
+    """Radiance [scene units] along primary rays: ray-traced visibility and shadows."""
+    active = mi.Bool(active)
+    si, ray = first_opaque_hit(scene, ray, max_layers, active)
+    return shade_hit(scene, si, ray, active, ray_shadows(scene))
+
+
+def film_position(X: mi.UInt32, Y: mi.UInt32, aa: int, w: int, h: int) -> mi.Point2f:
+    """Film position in [0, 1]^2 of the sub-cell centre of supersampled grid sample (X, Y)."""
+    x = mi.Float(X // aa) + (mi.Float(X % aa) + 0.5) / aa
+    y = mi.Float(Y // aa) + (mi.Float(Y % aa) + 0.5) / aa
+    return mi.Point2f(x / w, y / h)
+
+
 def pixel_rays(sensor: mi.Sensor, aa: int) -> tuple[mi.Ray3f, mi.Color3f, int, int]:
     """Primary rays through a fixed aa x aa pattern of each pixel (sub-cell centres).
 
     Returns:
         (rays, weights, width, height); the rays of pixel p are p*aa^2 ... p*aa^2+aa^2-1.
     """
-    film = sensor.film()
-    w, h = film.crop_size()
+    w, h = sensor.film().crop_size()
     n = aa * aa
     idx = dr.arange(mi.UInt32, w * h * n)
     pixel, sub = idx // n, idx % n
-    x = mi.Float(pixel % w) + (mi.Float(sub % aa) + 0.5) / aa
-    y = mi.Float(pixel // w) + (mi.Float(sub // aa) + 0.5) / aa
-    ray, weight = sensor.sample_ray(0.0, 0.5, mi.Point2f(x / w, y / h), mi.Point2f(0.5))
+    X, Y = (pixel % w) * aa + sub % aa, (pixel // w) * aa + sub // aa
+    ray, weight = sensor.sample_ray(0.0, 0.5, film_position(X, Y, aa, w, h), mi.Point2f(0.5))
     return ray, mi.Color3f(weight), int(w), int(h)
 
 
-def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8) -> mi.TensorXf:
+def zbuffer_hit(sensor: mi.Sensor, geom: zbuffer.Geometry, ray: mi.Ray3f,
+                aa: int) -> mi.SurfaceInteraction3f:
+    """What each primary ray sees, by z-buffer: rasterise, resolve, build interactions.
+
+    Fragments of shapes whose BSDF has a null component are discarded where its null
+    transmission (channel mean) is >= 1/2 — the alpha test as a fragment discard.
+    """
+    view = zbuffer.view_from_sensor(sensor, aa)
+    w, h = sensor.film().crop_size()
+    discard = None
+    if geom.alpha_any:
+        def discard(tri, X, Y, b1, b2, active):
+            active = active & dr.gather(mi.Bool, geom.alpha,
+                                        dr.gather(mi.UInt32, geom.shape_of, tri, active), active)
+            r, _ = sensor.sample_ray(0.0, 0.5, film_position(X, Y, aa, w, h), mi.Point2f(0.5),
+                                     active)
+            si = zbuffer.preliminary(geom, tri, b1, b2, r, active).compute_surface_interaction(
+                r, mi.RayFlags.All, active)
+            null = dr.mean(si.bsdf(r).eval_null_transmission(si, active), axis=0)
+            return active & (null >= 0.5)
+    keys, local = zbuffer.rasterise(view, geom, True, discard, aa)
+    hit = keys != zbuffer.EMPTY
+    tri = mi.UInt32(keys & 0xFFFFFFFF)
+    X, Y = zbuffer.sample_xy(view, dr.arange(mi.UInt32, dr.width(keys)), aa)
+    _, b1, b2, _ = zbuffer.fragment(view, local, geom, tri, X, Y, hit)
+    pi = zbuffer.preliminary(geom, tri, b1, b2, ray, hit)
+    return pi.compute_surface_interaction(ray, mi.RayFlags.All, hit)
+
+
+def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
+           options: Options | None = None, shapes=None) -> mi.TensorXf:
     """Render ``scene`` GPU-style; returns a (height, width, 3) linear RGB tensor.
 
     The aa x aa sub-samples of a pixel are averaged with equal weights (box filter);
     the film's own reconstruction filter is not used.
+
+    Args:
+        options: visibility and shadow methods (default: ray tracing, shadow rays).
+        shapes: the meshes to draw instead of ``scene.shapes()`` — with
+            ``visibility="zbuffer"`` and ``shadows="map"|"none"`` the scene then needs no
+            shapes at all, so Mitsuba builds no acceleration structure over them.
+
+    Raises:
+        ValueError: bad options, a film whose sample buffers exceed the memory budget
+            (before anything is allocated), or ``shapes`` given to a method that traces
+            rays through the scene.
     """
+    options = (options or Options()).check()
+    w, h = sensor.film().crop_size()
+    zbuffer.check_memory(int(w) * int(h) * aa * aa, f"a {w}x{h} film at aa={aa}")
+    traces = options.visibility == "raytrace" or options.shadows == "ray"
+    if shapes is not None and traces:
+        raise ValueError("raster: explicit 'shapes' need visibility='zbuffer' and "
+                         "shadows='map' or 'none' (rays are traced through the scene's shapes)")
+    geom = None
+    if options.visibility == "zbuffer" or options.shadows == "map":
+        geom = zbuffer.gather_geometry(scene.shapes() if shapes is None else shapes)
     ray, weight, w, h = pixel_rays(sensor, aa)
-    L = shade(scene, ray, max_layers) * weight
+    active = mi.Bool(True)
+    if options.visibility == "raytrace":
+        si, ray = first_opaque_hit(scene, ray, max_layers, active)
+    else:
+        si = zbuffer_hit(sensor, geom, ray, aa)
+    shadow_test = {"ray": lambda: ray_shadows(scene),
+                   "map": lambda: map_shadows(scene, geom, options),
+                   "none": lambda: no_shadows}[options.shadows]()
+    L = shade_hit(scene, si, ray, active, shadow_test) * weight
     n = aa * aa
     if n > 1:
         # evaluate the shading once: each channel's block_reduce would otherwise launch
