@@ -8,8 +8,8 @@
         <string name="visibility" value="raytrace"/>   <!-- raytrace|zbuffer -->
         <string name="shadows" value="ray"/>           <!-- ray|map|none -->
         <integer name="shadow_resolution" value="2048"/>  <!-- shadow-map texels per side -->
-        <float name="shadow_bias" value="1"/>          <!-- shadow-map bias, texels -->
-        <float name="shadow_slope_bias" value="1"/>    <!-- x tan(theta), texels -->
+        <float name="shadow_bias" value="0.5"/>        <!-- shadow-map depth bias, texels -->
+        <float name="shadow_normal_offset" value="1"/> <!-- lookup offset x sin(theta), texels -->
     </integrator>
 
 ``mi.render(scene)`` returns a (height, width, 3) image; ``spp`` and ``seed`` are ignored
@@ -39,7 +39,7 @@ class Raster(mi.SamplingIntegrator):
             shadows=str(props.get("shadows", defaults.shadows)),
             shadow_resolution=int(props.get("shadow_resolution", defaults.shadow_resolution)),
             shadow_bias=float(props.get("shadow_bias", defaults.shadow_bias)),
-            shadow_slope_bias=float(props.get("shadow_slope_bias", defaults.shadow_slope_bias)),
+            shadow_normal_offset=float(props.get("shadow_normal_offset", defaults.shadow_normal_offset)),
         ).check()
         self.shapes = None
 

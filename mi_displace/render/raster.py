@@ -118,13 +118,13 @@ class Options:
         shadows: ``"ray"`` (a hard shadow ray per delta light), ``"map"`` (shadow maps,
             :mod:`.shadow_map`) or ``"none"`` (delta lights unshadowed).
         shadow_resolution: shadow-map texels per side (cube faces for point lights).
-        shadow_bias, shadow_slope_bias: shadow-map bias, in texels (constant and x tan).
+        shadow_bias, shadow_normal_offset: shadow-map depth bias and normal offset, in texels.
     """
     visibility: str = "raytrace"
     shadows: str = "ray"
     shadow_resolution: int = 2048
-    shadow_bias: float = 1.0
-    shadow_slope_bias: float = 1.0
+    shadow_bias: float = 0.5
+    shadow_normal_offset: float = 1.0
 
     def check(self) -> "Options":
         """Raises ValueError naming the first bad field."""
@@ -136,7 +136,7 @@ class Options:
         if not (isinstance(self.shadow_resolution, int) and 1 <= self.shadow_resolution <= 16384):
             raise ValueError(f"raster: 'shadow_resolution' must be an integer in [1, 16384], "
                              f"got {self.shadow_resolution!r}")
-        for name in ("shadow_bias", "shadow_slope_bias"):
+        for name in ("shadow_bias", "shadow_normal_offset"):
             value = getattr(self, name)
             if not (value >= 0 and value < float("inf")):
                 raise ValueError(f"raster: {name!r} must be finite and >= 0, got {value!r}")
@@ -182,7 +182,7 @@ def map_shadows(scene: mi.Scene, geom: zbuffer.Geometry, options: Options):
     for e in scene.emitters():
         if _is_delta(e):
             maps[id(e)] = shadow_map.build(e, geom, options.shadow_resolution,
-                                           options.shadow_bias, options.shadow_slope_bias)
+                                           options.shadow_bias, options.shadow_normal_offset)
 
     def test(emitter, si, ds, lit):
         return shadow_map.unshadowed(maps[id(emitter)], si, ds.d, lit)
@@ -191,6 +191,39 @@ def map_shadows(scene: mi.Scene, geom: zbuffer.Geometry, options: Options):
 
 def no_shadows(emitter, si, ds, lit):
     return mi.Bool(True)
+
+
+def shadow_test_of(scene: mi.Scene, geom, options: Options):
+    """The shadow test ``options.shadows`` names (shadow maps are built here)."""
+    if options.shadows == "ray":
+        return ray_shadows(scene)
+    if options.shadows == "map":
+        return map_shadows(scene, geom, options)
+    return no_shadows
+
+
+def light_masks(scene: mi.Scene, sensor: mi.Sensor, options: Options,
+                aa: int = 1) -> tuple[mi.Bool, list]:
+    """Which visible points (ray-traced visibility) each delta light reaches, by
+    ``options.shadows`` — to measure shadow maps against shadow rays on the same points.
+
+    Returns:
+        (hit, masks): samples that see a surface, and one Bool per delta light (in
+        ``scene.emitters()`` order) that is True where the light reaches the point.
+    """
+    options = options.check()
+    ray, _, _, _ = pixel_rays(sensor, aa)
+    si, ray = first_opaque_hit(scene, ray, 8, mi.Bool(True))
+    hit = si.is_valid()
+    geom = zbuffer.gather_geometry(scene.shapes()) if options.shadows == "map" else None
+    test = shadow_test_of(scene, geom, options)
+    masks = []
+    for e in scene.emitters():
+        if _is_delta(e):
+            ds, _ = e.sample_direction(si, mi.Point2f(0.5), hit)
+            lit = hit & (ds.pdf > 0)
+            masks.append(lit & test(e, si, ds, lit))
+    return hit, masks
 
 
 def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8,
@@ -286,10 +319,7 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
         si, ray = first_opaque_hit(scene, ray, max_layers, active)
     else:
         si = zbuffer_hit(sensor, geom, ray, aa)
-    shadow_test = {"ray": lambda: ray_shadows(scene),
-                   "map": lambda: map_shadows(scene, geom, options),
-                   "none": lambda: no_shadows}[options.shadows]()
-    L = shade_hit(scene, si, ray, active, shadow_test) * weight
+    L = shade_hit(scene, si, ray, active, shadow_test_of(scene, geom, options)) * weight
     n = aa * aa
     if n > 1:
         # evaluate the shading once: each channel's block_reduce would otherwise launch
