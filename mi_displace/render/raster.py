@@ -276,11 +276,11 @@ def zbuffer_hit(sensor: mi.Sensor, geom: zbuffer.Geometry, ray: mi.Ray3f,
                 r, mi.RayFlags.All, active)
             null = dr.mean(si.bsdf(r).eval_null_transmission(si, active), axis=0)
             return active & (null >= 0.5)
-    keys, local = zbuffer.rasterise(view, geom, True, discard, aa)
+    keys, clip = zbuffer.rasterise(view, geom, True, discard, aa)
     hit = keys != zbuffer.EMPTY
     tri = mi.UInt32(keys & 0xFFFFFFFF)
     X, Y = zbuffer.sample_xy(view, dr.arange(mi.UInt32, dr.width(keys)), aa)
-    _, b1, b2, _ = zbuffer.fragment(view, local, geom, tri, X, Y, hit)
+    _, b1, b2, _ = zbuffer.fragment(view, clip, geom, tri, X, Y, hit)
     pi = zbuffer.preliminary(geom, tri, b1, b2, ray, hit)
     return pi.compute_surface_interaction(ray, mi.RayFlags.All, hit)
 

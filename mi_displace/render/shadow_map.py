@@ -60,7 +60,7 @@ def _frame(origin, forward) -> np.ndarray:
 
 def _perspective(to_local: np.ndarray, tan_half: float, res: int, near: float,
                  far: float) -> zbuffer.View:
-    return zbuffer.View(to_local=mi.Transform4f(to_local.astype(np.float32)), perspective=True,
+    return zbuffer.View(to_local=to_local, perspective=True,
                         q0=(-tan_half, -tan_half), dq=(2 * tan_half / res, 2 * tan_half / res),
                         near=near, far=far, width=res, height=res)
 
@@ -80,8 +80,7 @@ def light_views(emitter: mi.Emitter, bbox: mi.ScalarBoundingBox3f, res: int) -> 
         d = to_world[:3, 2] / np.linalg.norm(to_world[:3, 2])   # direction of travel
         to_local = _frame(centre - 1.01 * radius * d, d)
         r = 1.01 * radius
-        return [zbuffer.View(to_local=mi.Transform4f(to_local.astype(np.float32)),
-                             perspective=False, q0=(-r, -r), dq=(2 * r / res, 2 * r / res),
+        return [zbuffer.View(to_local=to_local, perspective=False, q0=(-r, -r), dq=(2 * r / res, 2 * r / res),
                              near=0.0, far=2.02 * radius, width=res, height=res)]
     if kind == "SpotLight":
         to_world = np.array(params["to_world"].matrix, dtype=np.float64).reshape(4, 4)
@@ -124,11 +123,9 @@ def unshadowed(sm: ShadowMap, si: mi.SurfaceInteraction3f, to_light: mi.Vector3f
     pending = mi.Bool(active)
     res = sm.resolution
     for view, depth in zip(sm.views, sm.depth):  # cube faces: the first face holding P
-        texel_dq = abs(view.dq[0])
-        z = (view.to_local @ si.p).z
-        texel = texel_dq * (z if view.perspective else 1.0)   # world size of a texel at P
+        texel = view.texel((view.to_clip @ si.p).z)   # world size of a texel at P
         # normal offset: the lookup moves off the surface by offset x texel x sin(theta)
-        p = view.to_local @ mi.Point3f(si.p + n_light * (texel * sm.normal_offset * sin))
+        p = view.to_clip @ mi.Point3f(si.p + n_light * (texel * sm.normal_offset * sin))
         gx, gy = view.grid(p)
         inside = pending & (gx >= 0) & (gx < res) & (gy >= 0) & (gy < res)
         if view.perspective:

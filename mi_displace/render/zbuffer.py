@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from functools import cached_property
 
 import drjit as dr
 import mitsuba as mi
@@ -150,18 +151,21 @@ def gather_geometry(shapes) -> Geometry:
 class View:
     """A projection onto a ``width`` x ``height`` sample grid.
 
-    A sample at continuous grid coordinate ``c = (cx, cy)`` (centres at integer + 1/2)
-    has ``q = q0 + c * dq``; perspective: ray from the local origin along (qx, qy, 1),
-    orthographic: from (qx, qy, 0) along +z.  Depth is the local z.
+    In view-local coordinates a sample at continuous grid coordinate ``c`` (centres at
+    integer + 1/2) has ``q = q0 + c * dq``; perspective: ray from the origin along
+    (qx, qy, 1), orthographic: from (qx, qy, 0) along +z.  Depth is the local z.
+    :attr:`to_clip` folds the q mapping into the transform: clip coordinates are
+    ``((x - q0x z) / dqx, (y - q0y z) / dqy, z)`` (perspective; the grid coordinate is
+    x/z, y/z) or ``((x - q0x) / dqx, (y - q0y) / dqy, z)`` (orthographic).
 
     Attributes:
-        to_local: world -> view-local affine transform.
+        to_local: world -> view-local affine matrix, (4, 4) float64.
         perspective: perspective (True) or orthographic.
         q0, dq: (2,) floats, see above.
         near, far: accepted local depth range.
         width, height: grid size in samples.
     """
-    to_local: mi.Transform4f
+    to_local: np.ndarray
     perspective: bool
     q0: tuple[float, float]
     dq: tuple[float, float]
@@ -170,19 +174,26 @@ class View:
     width: int
     height: int
 
+    @cached_property
+    def to_clip(self) -> mi.Transform4f:
+        """World -> clip transform (composed in float64, applied in float32)."""
+        a = np.eye(4)
+        a[0, 0], a[1, 1] = 1 / self.dq[0], 1 / self.dq[1]
+        column = 2 if self.perspective else 3
+        a[0, column], a[1, column] = -self.q0[0] / self.dq[0], -self.q0[1] / self.dq[1]
+        return mi.Transform4f((a @ self.to_local).astype(np.float32))
+
     def homogeneous(self, p: mi.Point3f) -> mi.Vector3f:
-        """h(p): (x, y, z) in perspective, (x, y, 1) in orthographic views."""
+        """h(p) of clip points: (x, y, z) in perspective, (x, y, 1) in orthographic views."""
         return mi.Vector3f(p.x, p.y, p.z if self.perspective else 1.0)
 
     def grid(self, p: mi.Point3f) -> tuple[mi.Float, mi.Float]:
-        """Continuous grid coordinates of view-local points ``p``."""
-        x, y = (p.x / p.z, p.y / p.z) if self.perspective else (p.x, p.y)
-        return (x - self.q0[0]) / self.dq[0], (y - self.q0[1]) / self.dq[1]
+        """Continuous grid coordinates of clip points ``p``."""
+        return (p.x / p.z, p.y / p.z) if self.perspective else (p.x, p.y)
 
-    def sample_q(self, X: mi.UInt32, Y: mi.UInt32) -> mi.Vector3f:
-        """(qx, qy, 1) at the centre of grid sample (X, Y)."""
-        return mi.Vector3f(self.q0[0] + (mi.Float(X) + 0.5) * self.dq[0],
-                           self.q0[1] + (mi.Float(Y) + 0.5) * self.dq[1], 1.0)
+    def texel(self, z: mi.Float) -> mi.Float:
+        """World size of one grid cell (along x) at local depth ``z``."""
+        return abs(self.dq[0]) * (z if self.perspective else 1.0)
 
 
 def view_from_sensor(sensor: mi.Sensor, aa: int = 1) -> View:
@@ -211,8 +222,8 @@ def view_from_sensor(sensor: mi.Sensor, aa: int = 1) -> View:
     q = d_l[:2] / d_l[2] if perspective else o_l[:2]
     q0 = (float(q[0, 0]), float(q[1, 0]))
     dq = (float(q[0, 1] - q[0, 0]) / (w * aa), float(q[1, 2] - q[1, 0]) / (h * aa))
-    return View(to_local=mi.Transform4f(to_local.astype(np.float32)), perspective=perspective,
-                q0=q0, dq=dq, near=float(o_l[2, 0]), far=float(far_l[2, 0]),
+    return View(to_local=to_local, perspective=perspective, q0=q0, dq=dq,
+                near=float(o_l[2, 0]), far=float(far_l[2, 0]),
                 width=int(w * aa), height=int(h * aa))
 
 
@@ -235,8 +246,9 @@ def sample_xy(view: View, index: mi.UInt32, aa: int) -> tuple[mi.UInt32, mi.UInt
     return (pixel % w) * aa + sub % aa, (pixel // w) * aa + sub // aa
 
 
-def _bbox(view: View, a: mi.Point3f, b: mi.Point3f, c: mi.Point3f):
-    """Grid bounding box of triangles (a, b, c) (view-local), clipped at the near plane.
+def _bbox(view: View, c: list):
+    """Grid bounding box of triangles with clip-space vertices ``c`` (3 Point3f),
+    clipped at the near plane.
 
     Returns:
         (x0, y0, width, height) of the candidate sample rectangle (Int32; width or height
@@ -252,20 +264,18 @@ def _bbox(view: View, a: mi.Point3f, b: mi.Point3f, c: mi.Point3f):
             lo[i] = dr.select(ok, dr.minimum(lo[i], g), lo[i])
             hi[i] = dr.select(ok, dr.maximum(hi[i], g), hi[i])
 
-    verts = (a, b, c)
     if view.perspective:
         for i in range(3):  # the polygon clipped at z = near: front vertices + crossings
-            p, q = verts[i], verts[(i + 1) % 3]
+            p, q = c[i], c[(i + 1) % 3]
             include(p, p.z >= view.near)
             crosses = (p.z < view.near) != (q.z < view.near)
-            s = (view.near - p.z) / (q.z - p.z)
-            x = dr.lerp(p, q, s)
+            x = dr.lerp(p, q, (view.near - p.z) / (q.z - p.z))
             include(mi.Point3f(x.x, x.y, view.near), crosses)
     else:
-        for p in verts:
+        for p in c:
             include(p, mi.Bool(True))
-    z_lo = dr.minimum(dr.minimum(a.z, b.z), c.z)
-    z_hi = dr.maximum(dr.maximum(a.z, b.z), c.z)
+    z_lo = dr.minimum(dr.minimum(c[0].z, c[1].z), c[2].z)
+    z_hi = dr.maximum(dr.maximum(c[0].z, c[1].z), c[2].z)
     keep = (z_hi >= view.near) & (z_lo <= view.far)
     size = (view.width, view.height)
     start, count = [], []
@@ -273,21 +283,17 @@ def _bbox(view: View, a: mi.Point3f, b: mi.Point3f, c: mi.Point3f):
         first = dr.clip(dr.ceil(lo[i] - 0.5 - BOX_MARGIN), 0, size[i])
         last = dr.clip(dr.floor(hi[i] - 0.5 + BOX_MARGIN), -1, size[i] - 1)
         start.append(mi.Int32(first))
-        count.append(dr.select(keep & (lo[i] <= hi[i]), dr.maximum(mi.Int32(last - first) + 1, 0), 0))
+        count.append(dr.select(keep & (lo[i] <= hi[i]),
+                               dr.maximum(mi.Int32(last - first) + 1, 0), 0))
     return start[0], start[1], count[0], count[1]
 
 
-def fragment(view: View, local: mi.Point3f, geom: Geometry, tri: mi.UInt32,
-             X: mi.UInt32, Y: mi.UInt32, active: mi.Bool):
-    """Inside test, barycentrics and depth of triangle ``tri`` at grid sample (X, Y).
-
-    ``local`` are the view-local vertices.  Returns ``(inside, b1, b2, z)``, with the
-    mesh convention p = (1 - b1 - b2) p0 + b1 p1 + b2 p2.
-    """
-    face = dr.gather(mi.Vector3u, geom.faces, tri, active)
-    p = [dr.gather(mi.Point3f, local, face[i], active) for i in range(3)]
-    h = [view.homogeneous(v) for v in p]
-    q = view.sample_q(X, Y)
+def _edges(view: View, face: mi.Vector3u, c: list, X: mi.UInt32, Y: mi.UInt32,
+           active: mi.Bool):
+    """Inside test, barycentrics and depth at grid sample (X, Y) of triangles with vertex
+    indices ``face`` and clip-space vertices ``c``: ``(inside, b1, b2, z)``."""
+    h = [view.homogeneous(v) for v in c]
+    q = mi.Vector3f(mi.Float(X) + 0.5, mi.Float(Y) + 0.5, 1.0)
     e = []
     for i in range(3):  # e_i: the edge opposite vertex i, in canonical vertex order
         j, k = (i + 1) % 3, (i + 2) % 3
@@ -300,52 +306,91 @@ def fragment(view: View, local: mi.Point3f, geom: Geometry, tri: mi.UInt32,
         ((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0)))
     inv = dr.rcp(total)
     b1, b2 = e[1] * inv, e[2] * inv
-    z = (1.0 - b1 - b2) * p[0].z + b1 * p[1].z + b2 * p[2].z
+    z = (1.0 - b1 - b2) * c[0].z + b1 * c[1].z + b2 * c[2].z
     inside &= (z >= view.near) & (z <= view.far)
     return inside, b1, b2, z
 
 
-def to_local(view: View, geom: Geometry) -> mi.Point3f:
-    """View-local vertex positions (one affine transform per vertex), evaluated."""
-    local = view.to_local @ geom.positions
-    dr.eval(local)
-    return local
+def _triangles(geom: Geometry, clip: mi.Point3f, tri: mi.UInt32, active: mi.Bool = True):
+    face = dr.gather(mi.Vector3u, geom.faces, tri, active)
+    return face, [dr.gather(mi.Point3f, clip, face[i], active) for i in range(3)]
+
+
+def fragment(view: View, clip: mi.Point3f, geom: Geometry, tri: mi.UInt32,
+             X: mi.UInt32, Y: mi.UInt32, active: mi.Bool):
+    """Inside test, barycentrics and depth of triangle ``tri`` at grid sample (X, Y).
+
+    ``clip`` are the clip-space vertices (:func:`to_clip`).  Returns ``(inside, b1, b2,
+    z)``, with the mesh convention p = (1 - b1 - b2) p0 + b1 p1 + b2 p2.
+    """
+    face, c = _triangles(geom, clip, tri, active)
+    return _edges(view, face, c, X, Y, active)
+
+
+def to_clip(view: View, geom: Geometry) -> mi.Point3f:
+    """Clip-space vertex positions (the vertex stage: one transform per vertex), evaluated."""
+    clip = view.to_clip @ geom.positions
+    dr.eval(clip)
+    return clip
 
 
 def rasterise(view: View, geom: Geometry, with_ids: bool = True, discard=None, aa: int = 1):
     """Depth-test every triangle of ``geom`` at every grid sample of ``view``.
+
+    Triangles with one candidate sample (micro-triangles, the common case after
+    tessellation) are tested in the same kernel that bins them, one thread per triangle;
+    the others are spread over one thread per candidate sample (their boxes recomputed,
+    so that only a mask per triangle is written).
 
     Args:
         with_ids: keep the triangle (UInt64 keys: depth bits << 32 | triangle id) or only
             the depth (UInt32 float bits: shadow maps).
         discard: optional ``f(tri, X, Y, b1, b2, active) -> Bool`` of fragments that do not
             enter the depth test (the alpha test).
+        aa: sub-samples per pixel side (sets the buffer order, :func:`sample_index`).
 
     Returns:
-        (keys, local): a (width * height,) UInt64 or UInt32 buffer in
-        :func:`sample_index` order for ``aa`` (:data:`EMPTY` / 0xFFFFFFFF where nothing
-        was drawn) and the view-local vertices.
+        (keys, clip): a (width * height,) UInt64 or UInt32 buffer in
+        :func:`sample_index` order (:data:`EMPTY` / 0xFFFFFFFF where nothing was drawn)
+        and the clip-space vertices.
     """
-    local = to_local(view, geom)
+    clip = to_clip(view, geom)
     n_faces = dr.width(geom.faces)
     samples = view.width * view.height
     keys = dr.full(mi.UInt64 if with_ids else mi.UInt32,
                    EMPTY if with_ids else 0xFFFFFFFF, samples)
     if n_faces == 0 or samples == 0:
-        return keys, local
+        return keys, clip
+
+    def depth_test(t, X, Y, inside, b1, b2, z):
+        if discard is not None:
+            inside &= ~discard(t, X, Y, b1, b2, inside)
+        depth = dr.reinterpret_array(mi.UInt32, dr.maximum(z, 0.0))
+        index = sample_index(view, X, Y, aa)
+        if with_ids:
+            key = (mi.UInt64(depth) << 32) | mi.UInt64(t)
+            dr.scatter_reduce(dr.ReduceOp.Min, keys, key, index, inside)
+        else:
+            dr.scatter_reduce(dr.ReduceOp.Min, keys, depth, index, inside)
+
     tri = dr.arange(mi.UInt32, n_faces)
-    face = geom.faces
-    x0, y0, bw, bh = _bbox(view, *(dr.gather(mi.Point3f, local, face[i]) for i in range(3)))
+    face, c = _triangles(geom, clip, tri)
+    x0, y0, bw, bh = _bbox(view, c)
     count = mi.UInt32(bw * bh)
-    busy = dr.compress(count > 0)           # triangles with candidate samples
+    # micro-triangles (one candidate sample): tested by the thread that bins them
+    depth_test(tri, mi.UInt32(x0), mi.UInt32(y0),
+               *_edges(view, face, c, mi.UInt32(x0), mi.UInt32(y0), count == 1))
+    large = count > 1
+    dr.eval(keys, large)   # only a mask leaves this kernel
+    busy = dr.compress(large)  # the rest: one thread per candidate sample
     if dr.width(busy) == 0:
-        return keys, local
-    counts = dr.gather(mi.UInt32, count, busy)
+        return keys, clip
+    _, c = _triangles(geom, clip, busy)
+    bx0, by0, bw, bh = _bbox(view, c)
+    counts = mi.UInt32(bw * bh)
     offsets = dr.prefix_sum(mi.UInt64(counts))  # exclusive
-    bx0 = dr.gather(mi.Int32, x0, busy)
-    by0 = dr.gather(mi.Int32, y0, busy)
-    bwid = mi.UInt32(dr.gather(mi.Int32, bw, busy))
-    dr.eval(offsets, bx0, by0, bwid, busy)
+    bwid = mi.UInt32(bw)
+    dr.eval(offsets, bx0, by0, bwid)
     total = int(dr.sum(mi.UInt64(counts))[0])
     for start in range(0, total, CHUNK):  # work batches, not triangles
         size = min(CHUNK, total - start)
@@ -361,18 +406,9 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, discard=None, a
         w = dr.maximum(dr.gather(mi.UInt32, bwid, k), 1)
         X = mi.UInt32(dr.gather(mi.Int32, bx0, k) + mi.Int32(j % w))
         Y = mi.UInt32(dr.gather(mi.Int32, by0, k) + mi.Int32(j // w))
-        inside, b1, b2, z = fragment(view, local, geom, t, X, Y, mi.Bool(True))
-        if discard is not None:
-            inside &= ~discard(t, X, Y, b1, b2, inside)
-        depth = dr.reinterpret_array(mi.UInt32, dr.maximum(z, 0.0))
-        index = sample_index(view, X, Y, aa)
-        if with_ids:
-            key = (mi.UInt64(depth) << 32) | mi.UInt64(t)
-            dr.scatter_reduce(dr.ReduceOp.Min, keys, key, index, inside)
-        else:
-            dr.scatter_reduce(dr.ReduceOp.Min, keys, depth, index, inside)
+        depth_test(t, X, Y, *fragment(view, clip, geom, t, X, Y, mi.Bool(True)))
         dr.eval(keys)
-    return keys, local
+    return keys, clip
 
 
 def preliminary(geom: Geometry, tri: mi.UInt32, b1: mi.Float, b2: mi.Float,
