@@ -48,6 +48,9 @@ import numpy as np
 
 #: Candidate (triangle, sample) pairs per rasterisation batch.
 CHUNK = 1 << 24
+#: Triangles with more candidate samples than ``small`` and at most this many loop over
+#: them in one thread; larger ones get one thread per candidate.
+MEDIUM = 64
 #: Key of a sample that no fragment reached.
 EMPTY = (1 << 64) - 1
 #: Grid units by which a bounding box is widened before rounding (the exact inside test
@@ -334,13 +337,15 @@ def to_clip(view: View, geom: Geometry) -> mi.Point3f:
     return clip
 
 
-def rasterise(view: View, geom: Geometry, with_ids: bool = True, discard=None, aa: int = 1):
+def rasterise(view: View, geom: Geometry, with_ids: bool = True, discard=None, aa: int = 1,
+              small: int = 1):
     """Depth-test every triangle of ``geom`` at every grid sample of ``view``.
 
-    Triangles with one candidate sample (micro-triangles, the common case after
-    tessellation) are tested in the same kernel that bins them, one thread per triangle;
-    the others are spread over one thread per candidate sample (their boxes recomputed,
-    so that only a mask per triangle is written).
+    Triangles with at most ``small`` candidate samples (micro-triangles, the common case
+    after tessellation) are tested in the same kernel that bins them, one thread per
+    triangle; those with up to :data:`MEDIUM` loop over their candidates in one thread;
+    larger ones are spread over one thread per candidate sample, so a screen-covering
+    triangle is as parallel as a million small ones.
 
     Args:
         with_ids: keep the triangle (UInt64 keys: depth bits << 32 | triangle id) or only
@@ -348,6 +353,8 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, discard=None, a
         discard: optional ``f(tri, X, Y, b1, b2, active) -> Bool`` of fragments that do not
             enter the depth test (the alpha test).
         aa: sub-samples per pixel side (sets the buffer order, :func:`sample_index`).
+        small: triangles with at most this many candidates are tested in the binning
+            kernel (each extra one costs every triangle an edge test).
 
     Returns:
         (keys, clip): a (width * height,) UInt64 or UInt32 buffer in
@@ -377,12 +384,26 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, discard=None, a
     face, c = _triangles(geom, clip, tri)
     x0, y0, bw, bh = _bbox(view, c)
     count = mi.UInt32(bw * bh)
-    # micro-triangles (one candidate sample): tested by the thread that bins them
-    depth_test(tri, mi.UInt32(x0), mi.UInt32(y0),
-               *_edges(view, face, c, mi.UInt32(x0), mi.UInt32(y0), count == 1))
-    large = count > 1
-    dr.eval(keys, large)   # only a mask leaves this kernel
-    busy = dr.compress(large)  # the rest: one thread per candidate sample
+    # small triangles (<= `small` candidate samples): tested by the thread that bins them
+    w = mi.UInt32(dr.maximum(bw, 1))  # >= 1: no division by zero, even in padding lanes
+    for i in range(small):
+        X, Y = mi.UInt32(x0) + i % w, mi.UInt32(y0) + i // w
+        depth_test(tri, X, Y, *_edges(view, face, c, X, Y, (count <= small) & (i < count)))
+    dr.eval(keys, count)
+    medium = dr.compress((count > small) & (count <= MEDIUM))
+    if dr.width(medium):  # a symbolic loop over each triangle's candidates, one thread each
+        face_m, c_m = _triangles(geom, clip, medium)
+        x0_m, y0_m, bw_m, bh_m = _bbox(view, c_m)
+        n_m, w_m = mi.UInt32(bw_m * bh_m), mi.UInt32(dr.maximum(bw_m, 1))
+
+        def body(i):
+            X, Y = mi.UInt32(x0_m) + i % w_m, mi.UInt32(y0_m) + i // w_m
+            depth_test(medium, X, Y, *_edges(view, face_m, c_m, X, Y, mi.Bool(True)))
+            return (i + 1,)
+
+        dr.while_loop((mi.UInt32(0),), lambda i: i < n_m, body, label="raster_medium")
+        dr.eval(keys)
+    busy = dr.compress(count > MEDIUM)  # the rest: one thread per candidate sample
     if dr.width(busy) == 0:
         return keys, clip
     _, c = _triangles(geom, clip, busy)
