@@ -319,7 +319,94 @@ def run(nu: int = 2000, with_ddm: bool = True, with_gl: bool = True) -> dict:
     return record
 
 
-# --- figures: consistency and the shadow-map trade ----------------------------------------
+# --- figures: spawn offsets, consistency and the shadow-map trade ------------------------
+
+def thorn_scene(k: float = 1.0, offset=(0.0, 0.0, 0.0), res: int = 64, theta: float = 80.0,
+                tiles=(16, 8)) -> mi.Scene:
+    """DDM thorns (exact) on a unit sphere, camera at ``theta`` degrees from the pole, a low
+    point key light and a directional fill, all scaled by ``k`` about the origin and then
+    moved by ``offset`` (the point light's intensity scaled by k^2: the same image)."""
+    t, o = np.radians(theta), np.array(offset, float)
+    return mi.load_dict({
+        "type": "scene", "integrator": {"type": "raster"},
+        "sensor": {"type": "perspective", "fov": 20, "near_clip": 0.01 * k,
+                   "to_world": mi.ScalarTransform4f().look_at(
+                       origin=(o + k * np.array([0, -5 * np.sin(t), 5 * np.cos(t)])).tolist(),
+                       target=o.tolist(), up=[0, 0, 1]),
+                   "film": {"type": "hdrfilm", "width": res, "height": res,
+                            "rfilter": {"type": "box"}}},
+        "s": {"type": "ddm", "base": "sphere", "tile": "thorn", "tiles_u": tiles[0],
+              "tiles_v": tiles[1], "height": 0.3, "mode": "exact",
+              "to_world": mi.ScalarTransform4f().translate(o.tolist()).scale(k),
+              "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.5, 0.3]}}},
+        "point": {"type": "point", "position": (o + k * np.array([4.5, -1.5, 0.6])).tolist(),
+                  "intensity": {"type": "rgb", "value": 45 * k * k}},
+        "sun": {"type": "directional", "direction": [0.3, 1, -0.5],
+                "irradiance": {"type": "rgb", "value": 0.25}}})
+
+
+def blocked_fraction(sc: mi.Scene, spawn=None) -> float:
+    """Fraction of camera hits whose shadow ray toward the point light is blocked;
+    ``spawn(si, target, active)`` makes the shadow ray (default ``raster.spawn_ray_to``;
+    Mitsuba's own: ``lambda si, p, a: si.spawn_ray_to(p)``)."""
+    spawn = spawn or raster.spawn_ray_to
+    ray, _, _, _ = raster.pixel_rays(sc.sensors()[0], 1)
+    si = sc.ray_intersect(ray)
+    light = [e for e in sc.emitters() if e.class_name() == "PointLight"][0]
+    ds, _ = light.sample_direction(si, mi.Point2f(0.5), si.is_valid())
+    blocked = sc.ray_test(spawn(si, ds.p, si.is_valid()), si.is_valid())
+    valid = np.array(si.is_valid())
+    return float(np.array(blocked)[valid].mean())
+
+
+def perturbed(sc: mi.Scene, relative: float = 1e-7, keep_normals: bool = True,
+              seed: int = 0) -> None:
+    """Move the vertices of shape ``s`` by ``relative`` x a normal deviate (in place)."""
+    params = mi.traverse(sc)
+    positions = np.array(params["s.vertex_positions"])
+    normals = np.array(params["s.vertex_normals"])
+    noise = np.random.default_rng(seed).standard_normal(positions.shape)
+    params["s.vertex_positions"] = mi.Float((positions * (1 + relative * noise)).astype(np.float32))
+    if keep_normals:
+        params["s.vertex_normals"] = mi.Float(normals)
+    params.update()
+
+
+def spawn_offsets() -> dict:
+    """Issue 12 item 8: shadow decisions under Mitsuba's spawn offset and ours when the
+    thorn scene is scaled or moved, and the image change of a 1e-7 vertex perturbation
+    with and without the normals kept."""
+    from mi_displace.evaluate.metrics import flip as flip_error
+
+    mitsuba = lambda si, p, a: si.spawn_ray_to(p)  # noqa: E731
+    rows = []
+    for k, offset in ((1.0, (0, 0, 0)), (1e-3, (0, 0, 0)), (1e3, (0, 0, 0)), (1.0, (1000, 0, 0))):
+        sc = thorn_scene(k, offset, res=128, tiles=(32, 16))
+        rows.append({"scale": k, "offset": list(offset),
+                     "blocked_mitsuba_spawn": blocked_fraction(sc, mitsuba),
+                     "blocked_spawn_offset": blocked_fraction(sc)})
+    ulps = {}
+    for offset in ((0, 0, 0), (1000, 0, 0)):
+        sc = thorn_scene(1.0, offset, res=128, tiles=(32, 16))
+        for half_ulps in (2, 8, 32, 128, 512):
+            default, raster.SPAWN_HALF_ULPS = raster.SPAWN_HALF_ULPS, half_ulps
+            ulps[f"{offset[0]}:{half_ulps}"] = blocked_fraction(sc)
+            raster.SPAWN_HALF_ULPS = default
+    perturbation = []
+    for theta in (70.0, 80.0, 85.0, 88.0, 89.5):
+        for keep in (True, False):
+            sc = thorn_scene(1.0, res=256 if keep else 128, theta=theta, tiles=(32, 16))
+            before = _image(sc)
+            perturbed(sc, keep_normals=keep)
+            after = _image(sc)
+            perturbation.append({"theta": theta, "normals_kept": keep,
+                                 "res": 256 if keep else 128,
+                                 "flip": float(flip_error(before, after)[0]),
+                                 "pixels_changed_1e-3": float(
+                                     np.mean(np.abs(after - before).max(axis=2) > 1e-3))})
+    return {"scaled": rows, "blocked_by_half_ulps": ulps, "perturbation": perturbation}
+
+
 
 #: Repository scenes drawn from triangle meshes only (bump_vs_displaced has an analytic
 #: sphere, which a rasteriser cannot draw).
@@ -471,10 +558,12 @@ def plot_shadow_sweep(rows: list[dict], path: Path) -> None:
 
 
 def figures(out_dir: Path) -> dict:
-    """Write ``raster_consistency.json``, ``raster_shadow_sweep.json`` and
-    ``raster_shadow_sweep.png`` to ``out_dir``."""
+    """Write ``raster_spawn.json``, ``raster_consistency.json``,
+    ``raster_shadow_sweep.json`` and ``raster_shadow_sweep.png`` to ``out_dir``."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    record = {"consistency": consistency()}
+    record = {"spawn": spawn_offsets()}
+    (out_dir / "raster_spawn.json").write_text(_json.dumps(record["spawn"], indent=2))
+    record["consistency"] = consistency()
     (out_dir / "raster_consistency.json").write_text(_json.dumps(record["consistency"], indent=2))
     record["shadow_sweep"] = shadow_sweep()
     (out_dir / "raster_shadow_sweep.json").write_text(_json.dumps(record["shadow_sweep"], indent=2))

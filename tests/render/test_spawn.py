@@ -7,41 +7,9 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+from mi_displace.bench.raster import blocked_fraction as shadowed_fraction
+from mi_displace.bench.raster import perturbed, thorn_scene
 from mi_displace.core.io import to_srgb
-from mi_displace.render import raster
-
-
-def thorn_scene(k=1.0, offset=(0.0, 0.0, 0.0), res=64, theta=80.0):
-    """Thorns (DDM exact) on a unit sphere, camera at `theta` from the pole, all scaled by
-    `k` about the origin and then moved by `offset` (light intensity scaled by k^2)."""
-    t, o = np.radians(theta), np.array(offset, float)
-    return mi.load_dict({
-        "type": "scene", "integrator": {"type": "raster"},
-        "sensor": {"type": "perspective", "fov": 20, "near_clip": 0.01 * k,
-                   "to_world": mi.ScalarTransform4f().look_at(
-                       origin=(o + k * np.array([0, -5 * np.sin(t), 5 * np.cos(t)])).tolist(),
-                       target=o.tolist(), up=[0, 0, 1]),
-                   "film": {"type": "hdrfilm", "width": res, "height": res,
-                            "rfilter": {"type": "box"}}},
-        "s": {"type": "ddm", "base": "sphere", "tile": "thorn", "tiles_u": 16, "tiles_v": 8,
-              "height": 0.3, "mode": "exact",
-              "to_world": mi.ScalarTransform4f().translate(o.tolist()).scale(k),
-              "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.5, 0.3]}}},
-        "point": {"type": "point", "position": (o + k * np.array([4.5, -1.5, 0.6])).tolist(),
-                  "intensity": {"type": "rgb", "value": 45 * k * k}},
-        "sun": {"type": "directional", "direction": [0.3, 1, -0.5],
-                "irradiance": {"type": "rgb", "value": 0.25}}})
-
-
-def shadowed_fraction(scene):
-    """Fraction of camera hits whose shadow ray toward the point light is blocked."""
-    ray, _, _, _ = raster.pixel_rays(scene.sensors()[0], 1)
-    si = scene.ray_intersect(ray)
-    light = [e for e in scene.emitters() if e.class_name() == "PointLight"][0]
-    ds, _ = light.sample_direction(si, mi.Point2f(0.5), si.is_valid())
-    blocked = scene.ray_test(raster.spawn_ray_to(si, ds.p, si.is_valid()), si.is_valid())
-    valid = np.array(si.is_valid())
-    return np.array(blocked)[valid].mean()
 
 
 def render(scene):
@@ -82,13 +50,7 @@ def test_vertices_moved_by_1e7_change_no_shadow(variant):
     the shadow rays, is a FLIP of 0.016 at these settings (docs/raster.md)."""
     scene = thorn_scene()
     before = render(scene)
-    params = mi.traverse(scene)
-    positions = np.array(params["s.vertex_positions"])
-    normals = np.array(params["s.vertex_normals"])
-    noise = np.random.default_rng(0).standard_normal(positions.shape)
-    params["s.vertex_positions"] = mi.Float((positions * (1 + 1e-7 * noise)).astype(np.float32))
-    params["s.vertex_normals"] = mi.Float(normals)
-    params.update()
+    perturbed(scene, 1e-7, keep_normals=True)
     after = render(scene)
     assert np.mean(np.abs(after - before).max(axis=2) > 1e-3) < 1e-3
     assert mean_flip(before, after) < 1e-4
