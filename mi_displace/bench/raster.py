@@ -44,6 +44,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.bench.ddm import _median
 from mi_displace.render import raster
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -51,18 +52,6 @@ SPOT = str(ROOT / "data" / "spot" / "spot_triangulated.obj")
 RES = 512
 SUN_DIRECTION = (-1.0, 1.0, -1.0)
 ALBEDO = (0.7, 0.6, 0.5)
-
-
-def _median(fn, repeats: int = 3) -> float:
-    fn()  # cold: JIT compilation
-    times = []
-    for _ in range(repeats):
-        dr.sync_thread()
-        start = time.perf_counter()
-        fn()
-        dr.sync_thread()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
 
 
 def sphere(nu: int) -> dict:
@@ -262,7 +251,7 @@ def ddm_frames(out: dict) -> None:
         scene_params["camel.time"] = t
         scene_params.update()   # the scene rebuilds its acceleration structure
 
-    out["ddm_frame_raytrace_s"] = _median(frame(rt, edit_scene))
+    out["ddm_frame_raytrace_s"] = _median(frame(rt, edit_scene), 3)
 
 
 def run(nu: int = 2000, with_ddm: bool = True, with_gl: bool = True) -> dict:
@@ -287,11 +276,11 @@ def run(nu: int = 2000, with_ddm: bool = True, with_gl: bool = True) -> dict:
     def build():
         return scene({"shape": shape}, raster.Options(shadows="none"))
 
-    record["accel_build_s"] = _median(lambda: (build(), dr.sync_thread()))
-    record["raytrace_s"] = _median(lambda: _image(build()))
+    record["accel_build_s"] = _median(lambda: (build(), dr.sync_thread()), 3)
+    record["raytrace_s"] = _median(lambda: _image(build()), 3)
     rt_image = _image(build())
     rtr = scene({"shape": shape}, raster.Options(shadows="ray"))
-    record["raytrace_shadow_rays_s"] = record["accel_build_s"] + _median(lambda: _image(rtr))
+    record["raytrace_shadow_rays_s"] = record["accel_build_s"] + _median(lambda: _image(rtr), 3)
     del rtr
     record["zbuffer_vs_raytrace_pixels_differing"] = float(
         np.mean(np.abs(zb_image - rt_image).max(axis=2) > 1e-3))
@@ -426,7 +415,7 @@ def _load(name: str, res: int) -> mi.Scene:
 def _render(sc: mi.Scene, options: raster.Options) -> tuple[np.ndarray, float]:
     integrator = sc.integrator()
     integrator.options = options
-    seconds = _median(lambda: _image(sc))
+    seconds = _median(lambda: _image(sc), 3)
     return _image(sc), seconds
 
 
@@ -573,12 +562,10 @@ def figures(out_dir: Path) -> dict:
 
 
 def main(json: bool = False) -> dict:
+    """Run the benchmark; print JSON (``json``) or one ``key = value`` line per field."""
     record = run()
-    if json:
-        print(_json.dumps(record, indent=2))
-    else:
-        for key, value in record.items():
-            print(f"{key:>32}: {value:.4g}" if isinstance(value, float) else f"{key:>32}: {value}")
+    print(_json.dumps(record, indent=2) if json else
+          "\n".join(f"{key} = {value}" for key, value in record.items()))
     return record
 
 
