@@ -256,33 +256,47 @@ def pixel_rays(sensor: mi.Sensor, aa: int) -> tuple[mi.Ray3f, mi.Color3f, int, i
     return ray, mi.Color3f(weight), int(w), int(h)
 
 
-def zbuffer_hit(sensor: mi.Sensor, geom: zbuffer.Geometry, ray: mi.Ray3f,
-                aa: int) -> mi.SurfaceInteraction3f:
+def zbuffer_hit(sensor: mi.Sensor, geom: zbuffer.Geometry, ray: mi.Ray3f, aa: int,
+                max_layers: int = 8) -> mi.SurfaceInteraction3f:
     """What each primary ray sees, by z-buffer: rasterise, resolve, build interactions.
 
-    Fragments of shapes whose BSDF has a null component are discarded where its null
-    transmission (channel mean) is >= 1/2 — the alpha test as a fragment discard.
+    Alpha test: a fragment of a shape whose BSDF has a null component does not count where
+    its null transmission (channel mean) is >= 1/2 — a GPU's fragment discard.  It is
+    evaluated lazily, by depth peeling: only the winning fragment of each sample is tested
+    and, where it is discarded, the sample is rasterised again keeping only fragments
+    behind it (up to ``max_layers`` layers, like the ray-traced path), so the alpha shader
+    runs once per sample and layer, not once per fragment.
     """
     view = zbuffer.view_from_sensor(sensor, aa)
-    w, h = sensor.film().crop_size()
-    discard = None
-    if geom.alpha_any:
-        def discard(tri, X, Y, b1, b2, active):
-            active = active & dr.gather(mi.Bool, geom.alpha,
-                                        dr.gather(mi.UInt32, geom.shape_of, tri, active), active)
-            r, _ = sensor.sample_ray(0.0, 0.5, film_position(X, Y, aa, w, h), mi.Point2f(0.5),
-                                     active)
-            si = zbuffer.preliminary(geom, tri, b1, b2, r, active).compute_surface_interaction(
-                r, mi.RayFlags.All, active)
-            null = dr.mean(si.bsdf(r).eval_null_transmission(si, active), axis=0)
-            return active & (null >= 0.5)
-    keys, clip = zbuffer.rasterise(view, geom, True, discard, aa)
-    hit = keys != zbuffer.EMPTY
-    tri = mi.UInt32(keys & 0xFFFFFFFF)
-    X, Y = zbuffer.sample_xy(view, dr.arange(mi.UInt32, dr.width(keys)), aa)
-    _, b1, b2, _ = zbuffer.fragment(view, clip, geom, tri, X, Y, hit)
-    pi = zbuffer.preliminary(geom, tri, b1, b2, ray, hit)
-    return pi.compute_surface_interaction(ray, mi.RayFlags.All, hit)
+    keys, clip = zbuffer.rasterise(view, geom, True, aa=aa)
+
+    def resolve(index, keys, ray):
+        """Interactions of the samples ``index`` whose keys are ``keys``."""
+        hit = keys != zbuffer.EMPTY
+        tri = mi.UInt32(keys & 0xFFFFFFFF)
+        X, Y = zbuffer.sample_xy(view, index, aa)
+        _, b1, b2, _ = zbuffer.fragment(view, clip, geom, tri, X, Y, hit)
+        pi = zbuffer.preliminary(geom, tri, b1, b2, ray, hit)
+        si = pi.compute_surface_interaction(ray, mi.RayFlags.All, hit)
+        alpha = hit & dr.gather(mi.Bool, geom.alpha,
+                                dr.gather(mi.UInt32, geom.shape_of, tri, hit), hit)
+        return si, alpha
+
+    everything = dr.arange(mi.UInt32, dr.width(keys))
+    pending = everything   # samples whose winning fragment may be discarded
+    for _ in range(max_layers - 1 if geom.alpha_any else 0):
+        r = dr.gather(mi.Ray3f, ray, pending)
+        si, alpha = resolve(pending, dr.gather(mi.UInt64, keys, pending), r)
+        null = dr.mean(si.bsdf(r).eval_null_transmission(si, alpha), axis=0)
+        pending = dr.gather(mi.UInt32, pending, dr.compress(alpha & (null >= 0.5)))
+        if dr.width(pending) == 0:
+            break
+        floor = dr.full(mi.UInt64, zbuffer.EMPTY, dr.width(keys))
+        dr.scatter(floor, dr.gather(mi.UInt64, keys, pending), pending)
+        behind, _ = zbuffer.rasterise(view, geom, True, aa=aa, floor=floor)
+        dr.scatter(keys, dr.gather(mi.UInt64, behind, pending), pending)
+        dr.eval(keys)
+    return resolve(everything, keys, ray)[0]
 
 
 def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
@@ -318,7 +332,7 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
     if options.visibility == "raytrace":
         si, ray = first_opaque_hit(scene, ray, max_layers, active)
     else:
-        si = zbuffer_hit(sensor, geom, ray, aa)
+        si = zbuffer_hit(sensor, geom, ray, aa, max_layers)
     L = shade_hit(scene, si, ray, active, shadow_test_of(scene, geom, options)) * weight
     n = aa * aa
     if n > 1:

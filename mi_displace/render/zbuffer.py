@@ -337,8 +337,8 @@ def to_clip(view: View, geom: Geometry) -> mi.Point3f:
     return clip
 
 
-def rasterise(view: View, geom: Geometry, with_ids: bool = True, discard=None, aa: int = 1,
-              small: int = 1):
+def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
+              small: int = 1, floor: mi.UInt64 | None = None):
     """Depth-test every triangle of ``geom`` at every grid sample of ``view``.
 
     Triangles with at most ``small`` candidate samples (micro-triangles, the common case
@@ -350,11 +350,11 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, discard=None, a
     Args:
         with_ids: keep the triangle (UInt64 keys: depth bits << 32 | triangle id) or only
             the depth (UInt32 float bits: shadow maps).
-        discard: optional ``f(tri, X, Y, b1, b2, active) -> Bool`` of fragments that do not
-            enter the depth test (the alpha test).
         aa: sub-samples per pixel side (sets the buffer order, :func:`sample_index`).
         small: triangles with at most this many candidates are tested in the binning
             kernel (each extra one costs every triangle an edge test).
+        floor: optional per-sample keys (``with_ids``): only fragments whose key is
+            larger enter the depth test (depth peeling; :data:`EMPTY` draws nothing).
 
     Returns:
         (keys, clip): a (width * height,) UInt64 or UInt32 buffer in
@@ -370,12 +370,12 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, discard=None, a
         return keys, clip
 
     def depth_test(t, X, Y, inside, b1, b2, z):
-        if discard is not None:
-            inside &= ~discard(t, X, Y, b1, b2, inside)
         depth = dr.reinterpret_array(mi.UInt32, dr.maximum(z, 0.0))
         index = sample_index(view, X, Y, aa)
         if with_ids:
             key = (mi.UInt64(depth) << 32) | mi.UInt64(t)
+            if floor is not None:
+                inside &= key > dr.gather(mi.UInt64, floor, index, inside)
             dr.scatter_reduce(dr.ReduceOp.Min, keys, key, index, inside)
         else:
             dr.scatter_reduce(dr.ReduceOp.Min, keys, depth, index, inside)
