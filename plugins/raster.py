@@ -9,7 +9,7 @@
         <string name="shadows" value="ray"/>           <!-- ray|map|none -->
         <integer name="shadow_resolution" value="2048"/>  <!-- shadow-map texels per side -->
         <float name="shadow_bias" value="0.5"/>        <!-- shadow-map depth bias, texels -->
-        <float name="shadow_normal_offset" value="1"/> <!-- lookup offset x sin(theta), texels -->
+        <float name="shadow_normal_offset" value="0.5"/> <!-- lookup offset x sin(theta), texels -->
     </integrator>
 
 ``mi.render(scene)`` returns a (height, width, 3) image; ``spp`` and ``seed`` are ignored

@@ -124,7 +124,7 @@ class Options:
     shadows: str = "ray"
     shadow_resolution: int = 2048
     shadow_bias: float = 0.5
-    shadow_normal_offset: float = 1.0
+    shadow_normal_offset: float = 0.5
 
     def check(self) -> "Options":
         """Raises ValueError naming the first bad field."""
