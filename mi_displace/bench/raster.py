@@ -454,11 +454,13 @@ def consistency(res: int = 256) -> list[dict]:
             ~si_rt.is_valid() | ((si_rt.prim_index == si_zb.prim_index)
                                  & (si_rt.shape == si_zb.shape)))
         view = zbuffer.view_from_sensor(sensor, aa)
-        keys, clip = zbuffer.rasterise(view, geom, True, None, aa)
+        keys, clip = zbuffer.rasterise(view, geom, True, aa=aa)
         tri = mi.UInt32(keys & 0xFFFFFFFF)
         X, Y = zbuffer.sample_xy(view, dr.arange(mi.UInt32, dr.width(keys)), aa)
         edge = np.array(_edge_distance(view, clip, geom, tri, X, Y, keys != zbuffer.EMPTY))
         differ = ~np.array(same)
+        t_rt, t_zb = np.array(si_rt.t), np.array(si_zb.t)
+        tie = np.abs(t_rt - t_zb) <= 1e-4 * np.minimum(t_rt, t_zb)  # both hits at one depth
         pixels = np.abs(zb_img - rt_img).max(axis=2) > 1e-3
         rows.append({
             "scene": name, "res": res, "aa": aa, "samples": int(differ.size),
@@ -466,6 +468,8 @@ def consistency(res: int = 256) -> list[dict]:
             **{f"of_which_within_{d:g}_samples_of_an_edge":
                float(np.mean(edge[differ] < d)) if differ.any() else None
                for d in (1e-4, 1e-3, 1e-2)},
+            "of_which_farther_than_1e-2_samples_but_same_depth_1e-4":
+                float(np.mean(tie[differ] & (edge[differ] >= 1e-2))) if differ.any() else None,
             "pixels_differing_1e-3": float(pixels.mean()),
             "max_abs_diff": float(np.abs(zb_img - rt_img).max()),
             "flip": float(flip_error(rt_img, zb_img)[0]),
