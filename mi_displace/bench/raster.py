@@ -460,7 +460,8 @@ def consistency(res: int = 256) -> list[dict]:
         edge = np.array(_edge_distance(view, clip, geom, tri, X, Y, keys != zbuffer.EMPTY))
         differ = ~np.array(same)
         t_rt, t_zb = np.array(si_rt.t), np.array(si_zb.t)
-        tie = np.abs(t_rt - t_zb) <= 1e-4 * np.minimum(t_rt, t_zb)  # both hits at one depth
+        with np.errstate(invalid="ignore"):  # inf - inf where both miss
+            tie = np.abs(t_rt - t_zb) <= 1e-4 * np.minimum(t_rt, t_zb)  # hits at one depth
         pixels = np.abs(zb_img - rt_img).max(axis=2) > 1e-3
         rows.append({
             "scene": name, "res": res, "aa": aa, "samples": int(differ.size),

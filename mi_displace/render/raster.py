@@ -17,6 +17,11 @@ coordinate), not Mitsuba's ``(1 + max|p|) x RayEpsilon``: that offset is absolut
 the origin and grows with the distance from it, so small or distant models lost their
 contact shadows (issue 12 item 8, measured in ``docs/raster.md``).
 
+Visibility and shadows are chosen per scene (:class:`Options`): ray tracing through
+Mitsuba's acceleration structure (the default) or the z-buffer of :mod:`.zbuffer`, shadow
+rays or the shadow maps of :mod:`.shadow_map`; with z-buffer and shadow maps no
+acceleration structure is needed (:func:`render`'s ``shapes``).
+
 Nothing is random: two renders are bit-identical.
 """
 from __future__ import annotations
@@ -234,13 +239,6 @@ def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8,
     return shade_hit(scene, si, ray, active, ray_shadows(scene))
 
 
-def film_position(X: mi.UInt32, Y: mi.UInt32, aa: int, w: int, h: int) -> mi.Point2f:
-    """Film position in [0, 1]^2 of the sub-cell centre of supersampled grid sample (X, Y)."""
-    x = mi.Float(X // aa) + (mi.Float(X % aa) + 0.5) / aa
-    y = mi.Float(Y // aa) + (mi.Float(Y % aa) + 0.5) / aa
-    return mi.Point2f(x / w, y / h)
-
-
 def pixel_rays(sensor: mi.Sensor, aa: int) -> tuple[mi.Ray3f, mi.Color3f, int, int]:
     """Primary rays through a fixed aa x aa pattern of each pixel (sub-cell centres).
 
@@ -251,8 +249,9 @@ def pixel_rays(sensor: mi.Sensor, aa: int) -> tuple[mi.Ray3f, mi.Color3f, int, i
     n = aa * aa
     idx = dr.arange(mi.UInt32, w * h * n)
     pixel, sub = idx // n, idx % n
-    X, Y = (pixel % w) * aa + sub % aa, (pixel // w) * aa + sub // aa
-    ray, weight = sensor.sample_ray(0.0, 0.5, film_position(X, Y, aa, w, h), mi.Point2f(0.5))
+    x = mi.Float(pixel % w) + (mi.Float(sub % aa) + 0.5) / aa
+    y = mi.Float(pixel // w) + (mi.Float(sub // aa) + 0.5) / aa
+    ray, weight = sensor.sample_ray(0.0, 0.5, mi.Point2f(x / w, y / h), mi.Point2f(0.5))
     return ray, mi.Color3f(weight), int(w), int(h)
 
 

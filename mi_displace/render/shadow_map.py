@@ -102,6 +102,9 @@ def build(emitter: mi.Emitter, geom: zbuffer.Geometry, res: int, constant: float
           normal_offset: float) -> ShadowMap:
     """Rasterise the shadow map of ``emitter`` over ``geom``."""
     views = light_views(emitter, geom.bbox, res)
+    # depth bits + float depth per texel and face
+    zbuffer.check_memory(len(views) * res * res,
+                         f"the {emitter.class_name()} shadow map ({len(views)} x {res}^2)", 8)
     depth = []
     for view in views:  # 1 or 6 faces
         bits, _ = zbuffer.rasterise(view, geom, with_ids=False)

@@ -1,9 +1,12 @@
 """`bench raster` on a small sphere: every timing field present and positive, the z-buffer
 image equal to the ray-traced one, the GL peer reported as null with its reason when not
 requested."""
+import pytest
+
 from mi_displace.bench import raster as bench
 
 
+@pytest.mark.slow
 def test_bench_raster_small(variant_llvm):
     record = bench.run(nu=80, with_ddm=False, with_gl=False)
     assert record["faces"] > 5_000
