@@ -183,6 +183,8 @@ def ray_shadows(scene: mi.Scene):
 
 def map_shadows(scene: mi.Scene, geom: zbuffer.Geometry, options: Options):
     """Shadow test by a shadow map per delta light (built here, once per render)."""
+    if dr.width(geom.faces) == 0:
+        return no_shadows   # nothing casts a shadow (and the scene has no bounds)
     maps = {}
     for e in scene.emitters():
         if _is_delta(e):
@@ -267,6 +269,10 @@ def zbuffer_hit(sensor: mi.Sensor, geom: zbuffer.Geometry, ray: mi.Ray3f, aa: in
     runs once per sample and layer, not once per fragment.
     """
     view = zbuffer.view_from_sensor(sensor, aa)
+    if dr.width(geom.faces) == 0:   # nothing to draw: every sample misses
+        si = dr.zeros(mi.SurfaceInteraction3f, dr.width(ray.d))
+        si.t, si.wi, si.wavelengths = dr.inf, -ray.d, ray.wavelengths
+        return si
     keys, clip = zbuffer.rasterise(view, geom, True, aa=aa)
 
     def resolve(index, keys, ray):

@@ -359,15 +359,15 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
     Returns:
         (keys, clip): a (width * height,) UInt64 or UInt32 buffer in
         :func:`sample_index` order (:data:`EMPTY` / 0xFFFFFFFF where nothing was drawn)
-        and the clip-space vertices.
+        and the clip-space vertices (None without triangles).
     """
-    clip = to_clip(view, geom)
     n_faces = dr.width(geom.faces)
     samples = view.width * view.height
     keys = dr.full(mi.UInt64 if with_ids else mi.UInt32,
                    EMPTY if with_ids else 0xFFFFFFFF, samples)
     if n_faces == 0 or samples == 0:
-        return keys, clip
+        return keys, None
+    clip = to_clip(view, geom)
 
     def depth_test(t, X, Y, inside, b1, b2, z):
         depth = dr.reinterpret_array(mi.UInt32, dr.maximum(z, 0.0))

@@ -198,3 +198,10 @@ def test_bad_options(variant):
         render(analytic, visibility="zbuffer")
     with pytest.raises(Exception, match="'visibility'"):
         load({"s": displaced_sphere()}, visibility="scanline")
+
+
+def test_empty_scene_shows_the_environment(variant):
+    """No triangles at all: every sample misses, as under ray tracing."""
+    scene = load({}, lights=("point", "sun", "ambient"))
+    zb = render(scene, visibility="zbuffer", shadows="map")
+    assert np.array_equal(zb, render(scene)) and np.allclose(zb, 0.2)
