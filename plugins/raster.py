@@ -4,11 +4,18 @@
 
     <integrator type="raster">
         <integer name="aa" value="1"/>          <!-- aa x aa fixed samples per pixel -->
-        <integer name="max_layers" value="8"/>  <!-- alpha-test pass-throughs -->
+        <integer name="max_layers" value="8"/>  <!-- alpha-test pass-throughs (raytrace) -->
+        <string name="visibility" value="raytrace"/>   <!-- raytrace|zbuffer -->
+        <string name="shadows" value="ray"/>           <!-- ray|map|none -->
+        <integer name="shadow_resolution" value="2048"/>  <!-- shadow-map texels per side -->
+        <float name="shadow_bias" value="0.5"/>        <!-- shadow-map depth bias, texels -->
+        <float name="shadow_normal_offset" value="0.5"/> <!-- lookup offset x sin(theta), texels -->
     </integrator>
 
 ``mi.render(scene)`` returns a (height, width, 3) image; ``spp`` and ``seed`` are ignored
-(the result is deterministic).
+(the result is deterministic).  ``integrator.shapes`` (a list of meshes, default ``None``:
+the scene's) lets a scene without shapes be drawn by z-buffer and shadow maps, with no
+acceleration structure built (``docs/raster.md``).
 """
 import mitsuba as mi
 
@@ -27,17 +34,28 @@ class Raster(mi.SamplingIntegrator):
             raise ValueError(f"raster: 'aa' must be a positive integer, got {self.aa}")
         if self.max_layers < 1:
             raise ValueError(f"raster: 'max_layers' must be >= 1, got {self.max_layers}")
+        defaults = raster.Options()
+        self.options = raster.Options(
+            visibility=str(props.get("visibility", defaults.visibility)),
+            shadows=str(props.get("shadows", defaults.shadows)),
+            shadow_resolution=int(props.get("shadow_resolution", defaults.shadow_resolution)),
+            shadow_bias=float(props.get("shadow_bias", defaults.shadow_bias)),
+            shadow_normal_offset=float(props.get("shadow_normal_offset", defaults.shadow_normal_offset)),
+        ).check()
+        self.shapes = None
 
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
-        return raster.render(scene, sensor, self.aa, self.max_layers)
+        return raster.render(scene, sensor, self.aa, self.max_layers, self.options, self.shapes)
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
         return raster.shade(scene, mi.Ray3f(ray), self.max_layers, active), mi.Bool(active), []
 
     def to_string(self):
-        return f"Raster[aa={self.aa}, max_layers={self.max_layers}]"
+        o = self.options
+        return (f"Raster[aa={self.aa}, max_layers={self.max_layers}, visibility={o.visibility}, "
+                f"shadows={o.shadows}, shadow_resolution={o.shadow_resolution}]")
 
 
 def register():

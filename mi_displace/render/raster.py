@@ -11,12 +11,30 @@ do not illuminate (they are not delta lights).  Shadow rays are blocked by every
 null BSDFs included, exactly as the emitter sampling of Mitsuba's ``path``; a technique's
 BSDF can add its own shadow test inside ``eval`` (VDM does).
 
+Shadow rays and alpha-test continuations leave the surface by :func:`spawn_offset`, a
+float32 error bound of the hit point (a fixed number of ulps of the hit triangle's largest
+coordinate), not Mitsuba's ``(1 + max|p|) x RayEpsilon``: that offset is absolute near
+the origin and grows with the distance from it, so small or distant models lost their
+contact shadows (issue 12 item 8, measured in ``docs/raster.md``).
+
+Visibility and shadows are chosen per scene (:class:`Options`): ray tracing through
+Mitsuba's acceleration structure (the default) or the z-buffer of :mod:`.zbuffer`, shadow
+rays or the shadow maps of :mod:`.shadow_map`; with z-buffer and shadow maps no
+acceleration structure is needed (:func:`render`'s ``shapes``).
+
 Nothing is random: two renders are bit-identical.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import drjit as dr
 import mitsuba as mi
+
+from mi_displace.render import shadow_map, zbuffer
+
+VISIBILITY = ("raytrace", "zbuffer")
+SHADOWS = ("ray", "map", "none")
 
 
 def _is_delta(emitter: mi.Emitter) -> bool:
@@ -25,6 +43,47 @@ def _is_delta(emitter: mi.Emitter) -> bool:
 
 def _is_ambient(emitter: mi.Emitter) -> bool:
     return emitter.class_name() == "ConstantBackgroundEmitter"
+
+
+#: Half-ulps (2^-24 relative) of the hit triangle's largest coordinate by which a secondary
+#: ray's origin leaves the surface along the geometric normal.  Barycentric interpolation of
+#: float32 vertices is exact to a few half-ulps; on the thorn sphere acne appears below 8 and
+#: contact shadows of a model 1000 units from the origin shrink above ~32 (docs/raster.md).
+SPAWN_HALF_ULPS = 32
+
+
+def spawn_offset(si: mi.SurfaceInteraction3f, d: mi.Vector3f,
+                 active: mi.Bool = True) -> mi.Point3f:
+    """Origin of a ray leaving ``si`` toward ``d``: ``si.p`` moved off the surface along the
+    geometric normal (to the side of ``d``) by ``SPAWN_HALF_ULPS`` x 2^-24 x the largest
+    absolute coordinate of the hit point and, on meshes, of the hit triangle's vertices.
+
+    Scale invariant: a model scaled by k gets an offset scaled by k, anywhere in space.
+    """
+    active = mi.Bool(active)
+    scale = dr.max(dr.abs(si.p))
+    on_mesh = active & si.is_valid() & si.shape.is_mesh()
+    mesh = mi.MeshPtr(si.shape)
+    face = mesh.face_indices(si.prim_index, on_mesh)
+    for k in range(3):
+        vertex = mesh.vertex_position(face[k], on_mesh)
+        scale = dr.select(on_mesh, dr.maximum(scale, dr.max(dr.abs(vertex))), scale)
+    n = dr.mulsign(mi.Vector3f(si.n), dr.dot(si.n, d))
+    return si.p + n * (scale * (SPAWN_HALF_ULPS * 2.0**-24))
+
+
+def spawn_ray(si: mi.SurfaceInteraction3f, d: mi.Vector3f, active: mi.Bool = True) -> mi.Ray3f:
+    """A ray from ``si`` along ``d`` (unbounded), origin by :func:`spawn_offset`."""
+    return mi.Ray3f(spawn_offset(si, d, active), d, si.time, si.wavelengths)
+
+
+def spawn_ray_to(si: mi.SurfaceInteraction3f, target: mi.Point3f,
+                 active: mi.Bool = True) -> mi.Ray3f:
+    """A shadow ray from ``si`` to ``target`` ending ``ShadowEpsilon`` (relative) short of it."""
+    o = spawn_offset(si, target - si.p, active)
+    ray = mi.Ray3f(o, target - o, si.time, si.wavelengths)
+    ray.maxt = 1.0 - mi.math.ShadowEpsilon
+    return ray
 
 
 def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int,
@@ -45,7 +104,7 @@ def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int,
         bsdf = si.bsdf(ray)
         null = dr.mean(bsdf.eval_null_transmission(si, going & si.is_valid()), axis=0)
         passes = going & si.is_valid() & (null >= 0.5) & (layer + 1 < max_layers)
-        ray = dr.select(passes, si.spawn_ray(ray.d), ray)
+        ray = dr.select(passes, spawn_ray(si, ray.d, passes), ray)
         return ray, layer + 1, passes
 
     ray, _, _ = dr.while_loop(state=(mi.Ray3f(ray), mi.UInt32(0), mi.Bool(active)),
@@ -54,11 +113,47 @@ def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int,
     return scene.ray_intersect(ray, active), ray
 
 
-def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8,
-          active: mi.Bool = True) -> mi.Color3f:
-    """Radiance [scene units] along primary rays under local illumination (module doc)."""
-    active = mi.Bool(active)
-    si, ray = first_opaque_hit(scene, ray, max_layers, active)
+@dataclass
+class Options:
+    """How `raster` finds what a pixel sees and what a light sees.
+
+    Attributes:
+        visibility: ``"raytrace"`` (one ray per sample through Mitsuba's acceleration
+            structure) or ``"zbuffer"`` (triangles rasterised, :mod:`.zbuffer`).
+        shadows: ``"ray"`` (a hard shadow ray per delta light), ``"map"`` (shadow maps,
+            :mod:`.shadow_map`) or ``"none"`` (delta lights unshadowed).
+        shadow_resolution: shadow-map texels per side (cube faces for point lights).
+        shadow_bias, shadow_normal_offset: shadow-map depth bias and normal offset, in texels.
+    """
+    visibility: str = "raytrace"
+    shadows: str = "ray"
+    shadow_resolution: int = 2048
+    shadow_bias: float = 0.5
+    shadow_normal_offset: float = 0.5
+
+    def check(self) -> "Options":
+        """Raises ValueError naming the first bad field."""
+        if self.visibility not in VISIBILITY:
+            raise ValueError(f"raster: 'visibility' must be one of {VISIBILITY}, "
+                             f"got {self.visibility!r}")
+        if self.shadows not in SHADOWS:
+            raise ValueError(f"raster: 'shadows' must be one of {SHADOWS}, got {self.shadows!r}")
+        if not (isinstance(self.shadow_resolution, int) and 1 <= self.shadow_resolution <= 16384):
+            raise ValueError(f"raster: 'shadow_resolution' must be an integer in [1, 16384], "
+                             f"got {self.shadow_resolution!r}")
+        for name in ("shadow_bias", "shadow_normal_offset"):
+            value = getattr(self, name)
+            if not (value >= 0 and value < float("inf")):
+                raise ValueError(f"raster: {name!r} must be finite and >= 0, got {value!r}")
+        return self
+
+
+def shade_hit(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f, active: mi.Bool,
+              shadow_test) -> mi.Color3f:
+    """Local illumination of the visible interactions ``si`` (module doc).
+
+    ``shadow_test(emitter, si, ds, lit) -> Bool`` says which points see a delta light.
+    """
     hit = active & si.is_valid()
     L = dr.zeros(mi.Color3f, dr.width(ray.d))
     # Directly visible emitters: area lights on the hit, the environment on a miss.
@@ -70,7 +165,7 @@ def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8,
         if _is_delta(e):
             ds, weight = e.sample_direction(si, mi.Point2f(0.5), hit)
             lit = hit & (ds.pdf > 0)
-            lit &= ~scene.ray_test(si.spawn_ray_to(ds.p), lit)
+            lit &= shadow_test(e, si, ds, lit)
             f = bsdf.eval(ctx, si, si.to_local(ds.d), lit)
             L += dr.select(lit, f * weight, 0.0)
         elif _is_ambient(e):
@@ -79,14 +174,80 @@ def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8,
     return L
 
 
+def ray_shadows(scene: mi.Scene):
+    """Shadow test by one shadow ray per light through the scene's acceleration structure."""
+    def test(emitter, si, ds, lit):
+        return ~scene.ray_test(spawn_ray_to(si, ds.p, lit), lit)
+    return test
+
+
+def map_shadows(scene: mi.Scene, geom: zbuffer.Geometry, options: Options):
+    """Shadow test by a shadow map per delta light (built here, once per render)."""
+    if dr.width(geom.faces) == 0:
+        return no_shadows   # nothing casts a shadow (and the scene has no bounds)
+    maps = {}
+    for e in scene.emitters():
+        if _is_delta(e):
+            maps[id(e)] = shadow_map.build(e, geom, options.shadow_resolution,
+                                           options.shadow_bias, options.shadow_normal_offset)
+
+    def test(emitter, si, ds, lit):
+        return shadow_map.unshadowed(maps[id(emitter)], si, ds.d, lit)
+    return test
+
+
+def no_shadows(emitter, si, ds, lit):
+    return mi.Bool(True)
+
+
+def shadow_test_of(scene: mi.Scene, geom, options: Options):
+    """The shadow test ``options.shadows`` names (shadow maps are built here)."""
+    if options.shadows == "ray":
+        return ray_shadows(scene)
+    if options.shadows == "map":
+        return map_shadows(scene, geom, options)
+    return no_shadows
+
+
+def light_masks(scene: mi.Scene, sensor: mi.Sensor, options: Options,
+                aa: int = 1) -> tuple[mi.Bool, list]:
+    """Which visible points (ray-traced visibility) each delta light reaches, by
+    ``options.shadows`` — to measure shadow maps against shadow rays on the same points.
+
+    Returns:
+        (hit, masks): samples that see a surface, and one Bool per delta light (in
+        ``scene.emitters()`` order) that is True where the light reaches the point.
+    """
+    options = options.check()
+    ray, _, _, _ = pixel_rays(sensor, aa)
+    si, ray = first_opaque_hit(scene, ray, 8, mi.Bool(True))
+    hit = si.is_valid()
+    geom = zbuffer.gather_geometry(scene.shapes()) if options.shadows == "map" else None
+    test = shadow_test_of(scene, geom, options)
+    masks = []
+    for e in scene.emitters():
+        if _is_delta(e):
+            ds, _ = e.sample_direction(si, mi.Point2f(0.5), hit)
+            lit = hit & (ds.pdf > 0)
+            masks.append(lit & test(e, si, ds, lit))
+    return hit, masks
+
+
+def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8,
+          active: mi.Bool = True) -> mi.Color3f:
+    """Radiance [scene units] along primary rays: ray-traced visibility and shadows."""
+    active = mi.Bool(active)
+    si, ray = first_opaque_hit(scene, ray, max_layers, active)
+    return shade_hit(scene, si, ray, active, ray_shadows(scene))
+
+
 def pixel_rays(sensor: mi.Sensor, aa: int) -> tuple[mi.Ray3f, mi.Color3f, int, int]:
     """Primary rays through a fixed aa x aa pattern of each pixel (sub-cell centres).
 
     Returns:
         (rays, weights, width, height); the rays of pixel p are p*aa^2 ... p*aa^2+aa^2-1.
     """
-    film = sensor.film()
-    w, h = film.crop_size()
+    w, h = sensor.film().crop_size()
     n = aa * aa
     idx = dr.arange(mi.UInt32, w * h * n)
     pixel, sub = idx // n, idx % n
@@ -96,14 +257,88 @@ def pixel_rays(sensor: mi.Sensor, aa: int) -> tuple[mi.Ray3f, mi.Color3f, int, i
     return ray, mi.Color3f(weight), int(w), int(h)
 
 
-def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8) -> mi.TensorXf:
+def zbuffer_hit(sensor: mi.Sensor, geom: zbuffer.Geometry, ray: mi.Ray3f, aa: int,
+                max_layers: int = 8) -> mi.SurfaceInteraction3f:
+    """What each primary ray sees, by z-buffer: rasterise, resolve, build interactions.
+
+    Alpha test: a fragment of a shape whose BSDF has a null component does not count where
+    its null transmission (channel mean) is >= 1/2 — a GPU's fragment discard.  It is
+    evaluated lazily, by depth peeling: only the winning fragment of each sample is tested
+    and, where it is discarded, the sample is rasterised again keeping only fragments
+    behind it (up to ``max_layers`` layers, like the ray-traced path), so the alpha shader
+    runs once per sample and layer, not once per fragment.
+    """
+    view = zbuffer.view_from_sensor(sensor, aa)
+    if dr.width(geom.faces) == 0:   # nothing to draw: every sample misses
+        si = dr.zeros(mi.SurfaceInteraction3f, dr.width(ray.d))
+        si.t, si.wi, si.wavelengths = dr.inf, -ray.d, ray.wavelengths
+        return si
+    keys, clip = zbuffer.rasterise(view, geom, True, aa=aa)
+
+    def resolve(index, keys, ray):
+        """Interactions of the samples ``index`` whose keys are ``keys``."""
+        hit = keys != zbuffer.EMPTY
+        tri = mi.UInt32(keys & 0xFFFFFFFF)
+        X, Y = zbuffer.sample_xy(view, index, aa)
+        _, b1, b2, _ = zbuffer.fragment(view, clip, geom, tri, X, Y, hit)
+        pi = zbuffer.preliminary(geom, tri, b1, b2, ray, hit)
+        si = pi.compute_surface_interaction(ray, mi.RayFlags.All, hit)
+        alpha = hit & dr.gather(mi.Bool, geom.alpha,
+                                dr.gather(mi.UInt32, geom.shape_of, tri, hit), hit)
+        return si, alpha
+
+    everything = dr.arange(mi.UInt32, dr.width(keys))
+    pending = everything   # samples whose winning fragment may be discarded
+    for _ in range(max_layers - 1 if geom.alpha_any else 0):
+        r = dr.gather(mi.Ray3f, ray, pending)
+        si, alpha = resolve(pending, dr.gather(mi.UInt64, keys, pending), r)
+        null = dr.mean(si.bsdf(r).eval_null_transmission(si, alpha), axis=0)
+        pending = dr.gather(mi.UInt32, pending, dr.compress(alpha & (null >= 0.5)))
+        if dr.width(pending) == 0:
+            break
+        floor = dr.full(mi.UInt64, zbuffer.EMPTY, dr.width(keys))
+        dr.scatter(floor, dr.gather(mi.UInt64, keys, pending), pending)
+        behind, _ = zbuffer.rasterise(view, geom, True, aa=aa, floor=floor)
+        dr.scatter(keys, dr.gather(mi.UInt64, behind, pending), pending)
+        dr.eval(keys)
+    return resolve(everything, keys, ray)[0]
+
+
+def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
+           options: Options | None = None, shapes=None) -> mi.TensorXf:
     """Render ``scene`` GPU-style; returns a (height, width, 3) linear RGB tensor.
 
     The aa x aa sub-samples of a pixel are averaged with equal weights (box filter);
     the film's own reconstruction filter is not used.
+
+    Args:
+        options: visibility and shadow methods (default: ray tracing, shadow rays).
+        shapes: the meshes to draw instead of ``scene.shapes()`` — with
+            ``visibility="zbuffer"`` and ``shadows="map"|"none"`` the scene then needs no
+            shapes at all, so Mitsuba builds no acceleration structure over them.
+
+    Raises:
+        ValueError: bad options, a film whose sample buffers exceed the memory budget
+            (before anything is allocated), or ``shapes`` given to a method that traces
+            rays through the scene.
     """
+    options = (options or Options()).check()
+    w, h = sensor.film().crop_size()
+    zbuffer.check_memory(int(w) * int(h) * aa * aa, f"a {w}x{h} film at aa={aa}")
+    traces = options.visibility == "raytrace" or options.shadows == "ray"
+    if shapes is not None and traces:
+        raise ValueError("raster: explicit 'shapes' need visibility='zbuffer' and "
+                         "shadows='map' or 'none' (rays are traced through the scene's shapes)")
+    geom = None
+    if options.visibility == "zbuffer" or options.shadows == "map":
+        geom = zbuffer.gather_geometry(scene.shapes() if shapes is None else shapes)
     ray, weight, w, h = pixel_rays(sensor, aa)
-    L = shade(scene, ray, max_layers) * weight
+    active = mi.Bool(True)
+    if options.visibility == "raytrace":
+        si, ray = first_opaque_hit(scene, ray, max_layers, active)
+    else:
+        si = zbuffer_hit(sensor, geom, ray, aa, max_layers)
+    L = shade_hit(scene, si, ray, active, shadow_test_of(scene, geom, options)) * weight
     n = aa * aa
     if n > 1:
         # evaluate the shading once: each channel's block_reduce would otherwise launch

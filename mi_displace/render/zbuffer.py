@@ -1,0 +1,448 @@
+"""Z-buffer visibility in Dr.Jit: triangles rasterised at sample positions, no ray tracing.
+
+The pipeline of a GPU, written as data-parallel array code (issue 18):
+
+1. **Geometry** (:func:`gather_geometry`): the triangles of every mesh concatenated
+   (world-space vertices, global vertex indices, the shape of each triangle).
+2. **View** (:class:`View`): an affine world -> view-local transform and a sample grid.
+   Perspective views cast a ray from the local origin along ``D = (qx, qy, 1)``,
+   orthographic views from ``(qx, qy, 0)`` along ``+z``; ``q`` is affine in the grid
+   coordinate.  :func:`view_from_sensor` fits it to a Mitsuba sensor's own ``sample_ray``
+   (perspective and orthographic, any fov and film crop), so the samples are exactly
+   the rays of :func:`mi_displace.render.raster.pixel_rays`.
+3. **Binning** (:func:`rasterise`): each triangle's screen bounding box — clipped at the
+   near plane, where the polygon's crossing points replace the vertices behind it — gives
+   its candidate samples.  Candidates of all triangles are enumerated in one flat range
+   (an exclusive prefix sum over the per-triangle counts; each candidate finds its triangle
+   by a segmented prefix sum), so a micro-triangle costs one thread and a screen-covering
+   triangle spreads over as many threads as it has samples.  The range is processed in
+   chunks of :data:`CHUNK` candidates (a Python loop over work batches, not triangles).
+4. **Inside test** (homogeneous rasterisation, Olano & Greer 1997): edge functions
+   ``e_ab = (h_a x h_b) . (qx, qy, 1)`` with ``h = (x, y, z)`` (perspective) or
+   ``(x, y, 1)`` (orthographic).  The same expression gives the perspective-correct
+   barycentrics ``b_i = e_i / sum(e)``; triangles behind the camera or crossing the near
+   plane need no geometric clipping: samples whose interpolated depth is outside
+   [near, far] are rejected.  Edges are evaluated in a canonical vertex order, so the two
+   triangles sharing an edge get bit-exactly opposite values: no sample falls through a
+   crack (samples exactly on an edge go to both; the depth test decides).
+5. **Depth test**: an atomic minimum (``dr.scatter_reduce(ReduceOp.Min)`` on UInt64) over
+   keys ``(float32 bits of the view depth) << 32 | triangle id``.  The depth is the
+   *linear* view-space z stored as a float32 (positive floats order like their bits):
+   floating point keeps 24 bits of relative precision at every distance, like a log
+   depth, with no [near, far] normalisation to lose precision far away.  Equal depths go
+   to the smaller triangle id: the result does not depend on the order of the atomics.
+
+The resolved visibility buffer (triangle id and barycentrics per sample) becomes a
+``mi.PreliminaryIntersection3f`` whose ``compute_surface_interaction`` is Mitsuba's own,
+so every BSDF and texture shades as under ray tracing.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from functools import cached_property
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+#: Candidate (triangle, sample) pairs per rasterisation batch.
+CHUNK = 1 << 24
+#: Triangles with more candidate samples than ``small`` and at most this many loop over
+#: them in one thread; larger ones get one thread per candidate.
+MEDIUM = 64
+#: Key of a sample that no fragment reached.
+EMPTY = (1 << 64) - 1
+#: Grid units by which a bounding box is widened before rounding (the exact inside test
+#: decides; this only keeps float rounding of the box from dropping a boundary sample).
+BOX_MARGIN = 1e-3
+#: Bytes per sample of a full z-buffer render (keys, rays, interaction, shading), used
+#: by :func:`check_memory` before anything is allocated.
+BYTES_PER_SAMPLE = 400
+
+
+def check_memory(samples: int, what: str, bytes_per_sample: int = BYTES_PER_SAMPLE) -> None:
+    """Refuse a render whose per-sample buffers would not fit in the available memory.
+
+    Raises:
+        ValueError: naming ``what`` (e.g. the film size), the bytes needed and available.
+    """
+    need = samples * bytes_per_sample
+    try:
+        pages = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError):
+        return
+    limit = int(os.environ.get("MI_DISPLACE_RASTER_MAX_BYTES", 0)) or pages // 2
+    if need > limit:
+        raise ValueError(
+            f"raster: {what} needs ~{need / 2**30:.1f} GiB of per-sample buffers "
+            f"({samples:,} samples x {bytes_per_sample} B), more than the "
+            f"{limit / 2**30:.1f} GiB allowed (half the available memory, or "
+            f"$MI_DISPLACE_RASTER_MAX_BYTES): lower the film size or 'aa'")
+
+
+@dataclass
+class Geometry:
+    """Triangles of a list of meshes, concatenated.
+
+    Attributes:
+        positions: world-space vertices, (V,) Point3f.
+        faces: global vertex indices, (F,) Vector3u.
+        shape_of: index into ``shapes`` of each triangle, (F,) UInt32.
+        first_face: global index of each shape's first triangle, (S,) UInt32.
+        shapes: (S,) ShapePtr.
+        alpha: per shape, whether its BSDF has a null (pass-through) component, (S,) Bool.
+        alpha_any: whether any shape needs the alpha test.
+        bbox: world bounding box of all shapes (ScalarBoundingBox3f).
+    """
+    positions: mi.Point3f
+    faces: mi.Vector3u
+    shape_of: mi.UInt32
+    first_face: mi.UInt32
+    shapes: mi.ShapePtr
+    alpha: mi.Bool
+    alpha_any: bool
+    bbox: mi.ScalarBoundingBox3f
+
+
+def _has_null(shape: mi.Shape) -> bool:
+    bsdf = shape.bsdf()
+    return bsdf is not None and mi.has_flag(bsdf.flags(), mi.BSDFFlags.Null)
+
+
+def gather_geometry(shapes) -> Geometry:
+    """Concatenate the triangles of ``shapes`` (every one must be a ``mi.Mesh``).
+
+    Raises:
+        ValueError: for a shape that is not a triangle mesh (analytic sphere, rectangle...).
+    """
+    shapes = list(shapes)
+    for shape in shapes:
+        if not shape.is_mesh():
+            raise ValueError(
+                f"raster: visibility='zbuffer' rasterises triangle meshes only; shape "
+                f"{shape.id() or shape.class_name()!r} ({shape.class_name()}) is not one "
+                f"(use a mesh, e.g. Mitsuba's 'ply'/'obj', or visibility='raytrace')")
+    v_counts = [s.vertex_count() for s in shapes]
+    f_counts = [s.face_count() for s in shapes]
+    v_off = np.concatenate([[0], np.cumsum(v_counts)]).astype(np.int64)
+    f_off = np.concatenate([[0], np.cumsum(f_counts)]).astype(np.int64)
+    positions = dr.zeros(mi.Float, 3 * int(v_off[-1]))
+    faces = dr.zeros(mi.UInt32, 3 * int(f_off[-1]))
+    bbox = mi.ScalarBoundingBox3f()
+    for i, shape in enumerate(shapes):  # a handful of shapes, not elements
+        if f_counts[i] == 0:
+            continue
+        dr.scatter(positions, shape.vertex_positions_buffer(),
+                   dr.arange(mi.UInt32, 3 * v_counts[i]) + int(3 * v_off[i]))
+        dr.scatter(faces, shape.faces_buffer() + int(v_off[i]),
+                   dr.arange(mi.UInt32, 3 * f_counts[i]) + int(3 * f_off[i]))
+        bbox.expand(shape.bbox())
+    shape_of = dr.zeros(mi.UInt32, int(f_off[-1]))
+    if len(shapes) > 1:
+        starts = mi.UInt32(f_off[1:-1].astype(np.uint32))
+        dr.scatter_add(shape_of, 1, starts, starts < int(f_off[-1]))
+        shape_of = dr.prefix_sum(shape_of) + shape_of  # inclusive: shape of each face
+    alpha = [_has_null(s) for s in shapes]
+    return Geometry(
+        positions=dr.unravel(mi.Point3f, positions), faces=dr.unravel(mi.Vector3u, faces),
+        shape_of=shape_of, first_face=mi.UInt32(f_off[:-1].astype(np.uint32)),
+        shapes=mi.ShapePtr(shapes), alpha=mi.Bool(alpha), alpha_any=any(alpha), bbox=bbox)
+
+
+@dataclass
+class View:
+    """A projection onto a ``width`` x ``height`` sample grid.
+
+    In view-local coordinates a sample at continuous grid coordinate ``c`` (centres at
+    integer + 1/2) has ``q = q0 + c * dq``; perspective: ray from the origin along
+    (qx, qy, 1), orthographic: from (qx, qy, 0) along +z.  Depth is the local z.
+    :attr:`to_clip` folds the q mapping into the transform: clip coordinates are
+    ``((x - q0x z) / dqx, (y - q0y z) / dqy, z)`` (perspective; the grid coordinate is
+    x/z, y/z) or ``((x - q0x) / dqx, (y - q0y) / dqy, z)`` (orthographic).
+
+    Attributes:
+        to_local: world -> view-local affine matrix, (4, 4) float64.
+        perspective: perspective (True) or orthographic.
+        q0, dq: (2,) floats, see above.
+        near, far: accepted local depth range.
+        width, height: grid size in samples.
+    """
+    to_local: np.ndarray
+    perspective: bool
+    q0: tuple[float, float]
+    dq: tuple[float, float]
+    near: float
+    far: float
+    width: int
+    height: int
+
+    @cached_property
+    def to_clip(self) -> mi.Transform4f:
+        """World -> clip transform (composed in float64, applied in float32)."""
+        a = np.eye(4)
+        a[0, 0], a[1, 1] = 1 / self.dq[0], 1 / self.dq[1]
+        column = 2 if self.perspective else 3
+        a[0, column], a[1, column] = -self.q0[0] / self.dq[0], -self.q0[1] / self.dq[1]
+        return mi.Transform4f((a @ self.to_local).astype(np.float32))
+
+    def homogeneous(self, p: mi.Point3f) -> mi.Vector3f:
+        """h(p) of clip points: (x, y, z) in perspective, (x, y, 1) in orthographic views."""
+        return mi.Vector3f(p.x, p.y, p.z if self.perspective else 1.0)
+
+    def grid(self, p: mi.Point3f) -> tuple[mi.Float, mi.Float]:
+        """Continuous grid coordinates of clip points ``p``."""
+        return (p.x / p.z, p.y / p.z) if self.perspective else (p.x, p.y)
+
+    def texel(self, z: mi.Float) -> mi.Float:
+        """World size of one grid cell (along x) at local depth ``z``."""
+        return abs(self.dq[0]) * (z if self.perspective else 1.0)
+
+
+def view_from_sensor(sensor: mi.Sensor, aa: int = 1) -> View:
+    """The :class:`View` whose grid samples are the sensor's rays through the aa x aa
+    sub-cell centres of each pixel of the film's crop window.
+
+    Raises:
+        ValueError: for sensors other than ``perspective`` and ``orthographic``.
+    """
+    kind = sensor.class_name()
+    if kind not in ("PerspectiveCamera", "OrthographicCamera"):
+        raise ValueError(f"raster: visibility='zbuffer' supports 'perspective' and "
+                         f"'orthographic' sensors, not {kind!r}")
+    w, h = sensor.film().crop_size()
+    to_world = np.array(sensor.world_transform().matrix, dtype=np.float64).reshape(4, 4)
+    to_local = np.linalg.inv(to_world)
+    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f([0.0, 1.0, 0.0], [0.0, 0.0, 1.0]),
+                               mi.Point2f(0.5))
+    o = np.array(ray.o, dtype=np.float64)
+    d = np.array(ray.d, dtype=np.float64)
+    far_p = o + d * np.array(ray.maxt, dtype=np.float64)
+    o_l = to_local[:3, :3] @ o + to_local[:3, 3:4]
+    d_l = to_local[:3, :3] @ d
+    far_l = to_local[:3, :3] @ far_p + to_local[:3, 3:4]
+    perspective = kind == "PerspectiveCamera"
+    q = d_l[:2] / d_l[2] if perspective else o_l[:2]
+    q0 = (float(q[0, 0]), float(q[1, 0]))
+    dq = (float(q[0, 1] - q[0, 0]) / (w * aa), float(q[1, 2] - q[1, 0]) / (h * aa))
+    return View(to_local=to_local, perspective=perspective, q0=q0, dq=dq,
+                near=float(o_l[2, 0]), far=float(far_l[2, 0]),
+                width=int(w * aa), height=int(h * aa))
+
+
+def sample_index(view: View, X: mi.UInt32, Y: mi.UInt32, aa: int) -> mi.UInt32:
+    """Index of grid sample (X, Y) in the order of ``raster.pixel_rays``
+    (pixel-major, aa x aa sub-samples row by row)."""
+    if aa == 1:
+        return Y * view.width + X
+    pixel = (Y // aa) * (view.width // aa) + X // aa
+    return pixel * (aa * aa) + (Y % aa) * aa + X % aa
+
+
+def sample_xy(view: View, index: mi.UInt32, aa: int) -> tuple[mi.UInt32, mi.UInt32]:
+    """Grid sample (X, Y) of each :func:`sample_index` ``index`` (its inverse)."""
+    if aa == 1:
+        return index % view.width, index // view.width
+    n = aa * aa
+    pixel, sub = index // n, index % n
+    w = view.width // aa
+    return (pixel % w) * aa + sub % aa, (pixel // w) * aa + sub // aa
+
+
+def _bbox(view: View, c: list):
+    """Grid bounding box of triangles with clip-space vertices ``c`` (3 Point3f),
+    clipped at the near plane.
+
+    Returns:
+        (x0, y0, width, height) of the candidate sample rectangle (Int32; width or height
+        0 for culled triangles).
+    """
+    lo = [mi.Float(dr.inf), mi.Float(dr.inf)]
+    hi = [mi.Float(-dr.inf), mi.Float(-dr.inf)]
+
+    def include(p, ok):
+        gx, gy = view.grid(p)
+        ok = ok & dr.isfinite(gx) & dr.isfinite(gy)
+        for i, g in enumerate((gx, gy)):
+            lo[i] = dr.select(ok, dr.minimum(lo[i], g), lo[i])
+            hi[i] = dr.select(ok, dr.maximum(hi[i], g), hi[i])
+
+    if view.perspective:
+        for i in range(3):  # the polygon clipped at z = near: front vertices + crossings
+            p, q = c[i], c[(i + 1) % 3]
+            include(p, p.z >= view.near)
+            crosses = (p.z < view.near) != (q.z < view.near)
+            x = dr.lerp(p, q, (view.near - p.z) / (q.z - p.z))
+            include(mi.Point3f(x.x, x.y, view.near), crosses)
+    else:
+        for p in c:
+            include(p, mi.Bool(True))
+    z_lo = dr.minimum(dr.minimum(c[0].z, c[1].z), c[2].z)
+    z_hi = dr.maximum(dr.maximum(c[0].z, c[1].z), c[2].z)
+    keep = (z_hi >= view.near) & (z_lo <= view.far)
+    size = (view.width, view.height)
+    start, count = [], []
+    for i in range(2):
+        first = dr.clip(dr.ceil(lo[i] - 0.5 - BOX_MARGIN), 0, size[i])
+        last = dr.clip(dr.floor(hi[i] - 0.5 + BOX_MARGIN), -1, size[i] - 1)
+        start.append(mi.Int32(first))
+        count.append(dr.select(keep & (lo[i] <= hi[i]),
+                               dr.maximum(mi.Int32(last - first) + 1, 0), 0))
+    return start[0], start[1], count[0], count[1]
+
+
+def _edges(view: View, face: mi.Vector3u, c: list, X: mi.UInt32, Y: mi.UInt32,
+           active: mi.Bool):
+    """Inside test, barycentrics and depth at grid sample (X, Y) of triangles with vertex
+    indices ``face`` and clip-space vertices ``c``: ``(inside, b1, b2, z)``."""
+    h = [view.homogeneous(v) for v in c]
+    q = mi.Vector3f(mi.Float(X) + 0.5, mi.Float(Y) + 0.5, 1.0)
+    e = []
+    for i in range(3):  # e_i: the edge opposite vertex i, in canonical vertex order
+        j, k = (i + 1) % 3, (i + 2) % 3
+        swap = face[j] > face[k]
+        hj, hk = dr.select(swap, h[k], h[j]), dr.select(swap, h[j], h[k])
+        value = dr.dot(dr.cross(hj, hk), q)
+        e.append(dr.select(swap, -value, value))
+    total = e[0] + e[1] + e[2]
+    inside = active & (total != 0) & (
+        ((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0)))
+    inv = dr.rcp(total)
+    b1, b2 = e[1] * inv, e[2] * inv
+    z = (1.0 - b1 - b2) * c[0].z + b1 * c[1].z + b2 * c[2].z
+    inside &= (z >= view.near) & (z <= view.far)
+    return inside, b1, b2, z
+
+
+def _triangles(geom: Geometry, clip: mi.Point3f, tri: mi.UInt32, active: mi.Bool = True):
+    face = dr.gather(mi.Vector3u, geom.faces, tri, active)
+    return face, [dr.gather(mi.Point3f, clip, face[i], active) for i in range(3)]
+
+
+def fragment(view: View, clip: mi.Point3f, geom: Geometry, tri: mi.UInt32,
+             X: mi.UInt32, Y: mi.UInt32, active: mi.Bool):
+    """Inside test, barycentrics and depth of triangle ``tri`` at grid sample (X, Y).
+
+    ``clip`` are the clip-space vertices (:func:`to_clip`).  Returns ``(inside, b1, b2,
+    z)``, with the mesh convention p = (1 - b1 - b2) p0 + b1 p1 + b2 p2.
+    """
+    face, c = _triangles(geom, clip, tri, active)
+    return _edges(view, face, c, X, Y, active)
+
+
+def to_clip(view: View, geom: Geometry) -> mi.Point3f:
+    """Clip-space vertex positions (the vertex stage: one transform per vertex), evaluated."""
+    clip = view.to_clip @ geom.positions
+    dr.eval(clip)
+    return clip
+
+
+def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
+              small: int = 1, floor: mi.UInt64 | None = None):
+    """Depth-test every triangle of ``geom`` at every grid sample of ``view``.
+
+    Triangles with at most ``small`` candidate samples (micro-triangles, the common case
+    after tessellation) are tested in the same kernel that bins them, one thread per
+    triangle; those with up to :data:`MEDIUM` loop over their candidates in one thread;
+    larger ones are spread over one thread per candidate sample, so a screen-covering
+    triangle is as parallel as a million small ones.
+
+    Args:
+        with_ids: keep the triangle (UInt64 keys: depth bits << 32 | triangle id) or only
+            the depth (UInt32 float bits: shadow maps).
+        aa: sub-samples per pixel side (sets the buffer order, :func:`sample_index`).
+        small: triangles with at most this many candidates are tested in the binning
+            kernel (each extra one costs every triangle an edge test).
+        floor: optional per-sample keys (``with_ids``): only fragments whose key is
+            larger enter the depth test (depth peeling; :data:`EMPTY` draws nothing).
+
+    Returns:
+        (keys, clip): a (width * height,) UInt64 or UInt32 buffer in
+        :func:`sample_index` order (:data:`EMPTY` / 0xFFFFFFFF where nothing was drawn)
+        and the clip-space vertices (None without triangles).
+    """
+    n_faces = dr.width(geom.faces)
+    samples = view.width * view.height
+    keys = dr.full(mi.UInt64 if with_ids else mi.UInt32,
+                   EMPTY if with_ids else 0xFFFFFFFF, samples)
+    if n_faces == 0 or samples == 0:
+        return keys, None
+    clip = to_clip(view, geom)
+
+    def depth_test(t, X, Y, inside, b1, b2, z):
+        depth = dr.reinterpret_array(mi.UInt32, dr.maximum(z, 0.0))
+        index = sample_index(view, X, Y, aa)
+        if with_ids:
+            key = (mi.UInt64(depth) << 32) | mi.UInt64(t)
+            if floor is not None:
+                inside &= key > dr.gather(mi.UInt64, floor, index, inside)
+            dr.scatter_reduce(dr.ReduceOp.Min, keys, key, index, inside)
+        else:
+            dr.scatter_reduce(dr.ReduceOp.Min, keys, depth, index, inside)
+
+    tri = dr.arange(mi.UInt32, n_faces)
+    face, c = _triangles(geom, clip, tri)
+    x0, y0, bw, bh = _bbox(view, c)
+    count = mi.UInt32(bw * bh)
+    # small triangles (<= `small` candidate samples): tested by the thread that bins them
+    w = mi.UInt32(dr.maximum(bw, 1))  # >= 1: no division by zero, even in padding lanes
+    for i in range(small):
+        X, Y = mi.UInt32(x0) + i % w, mi.UInt32(y0) + i // w
+        depth_test(tri, X, Y, *_edges(view, face, c, X, Y, (count <= small) & (i < count)))
+    dr.eval(keys, count)
+    medium = dr.compress((count > small) & (count <= MEDIUM))
+    if dr.width(medium):  # a symbolic loop over each triangle's candidates, one thread each
+        face_m, c_m = _triangles(geom, clip, medium)
+        x0_m, y0_m, bw_m, bh_m = _bbox(view, c_m)
+        n_m, w_m = mi.UInt32(bw_m * bh_m), mi.UInt32(dr.maximum(bw_m, 1))
+
+        def body(i):
+            X, Y = mi.UInt32(x0_m) + i % w_m, mi.UInt32(y0_m) + i // w_m
+            depth_test(medium, X, Y, *_edges(view, face_m, c_m, X, Y, mi.Bool(True)))
+            return (i + 1,)
+
+        dr.while_loop((mi.UInt32(0),), lambda i: i < n_m, body, label="raster_medium")
+        dr.eval(keys)
+    busy = dr.compress(count > MEDIUM)  # the rest: one thread per candidate sample
+    if dr.width(busy) == 0:
+        return keys, clip
+    _, c = _triangles(geom, clip, busy)
+    bx0, by0, bw, bh = _bbox(view, c)
+    counts = mi.UInt32(bw * bh)
+    offsets = dr.prefix_sum(mi.UInt64(counts))  # exclusive
+    bwid = mi.UInt32(bw)
+    dr.eval(offsets, bx0, by0, bwid)
+    total = int(dr.sum(mi.UInt64(counts))[0])
+    for start in range(0, total, CHUNK):  # work batches, not triangles
+        size = min(CHUNK, total - start)
+        seg = dr.zeros(mi.UInt32, size)
+        inner = (offsets > start) & (offsets < start + size)
+        dr.scatter_add(seg, 1, mi.UInt32(offsets - start), inner)
+        first = mi.UInt32(dr.count(offsets <= start)) - 1
+        k = first + dr.prefix_sum(seg) + seg
+        t = dr.gather(mi.UInt32, busy, k)
+        j = mi.UInt32(start + dr.arange(mi.UInt64, size) - dr.gather(mi.UInt64, offsets, k))
+        # >= 1 also in the LLVM backend's padding lanes, where a gather yields 0 and an
+        # integer division by it raises SIGFPE
+        w = dr.maximum(dr.gather(mi.UInt32, bwid, k), 1)
+        X = mi.UInt32(dr.gather(mi.Int32, bx0, k) + mi.Int32(j % w))
+        Y = mi.UInt32(dr.gather(mi.Int32, by0, k) + mi.Int32(j // w))
+        depth_test(t, X, Y, *fragment(view, clip, geom, t, X, Y, mi.Bool(True)))
+        dr.eval(keys)
+    return keys, clip
+
+
+def preliminary(geom: Geometry, tri: mi.UInt32, b1: mi.Float, b2: mi.Float,
+                ray: mi.Ray3f, active: mi.Bool) -> mi.PreliminaryIntersection3f:
+    """A Mitsuba preliminary intersection of ``ray`` with triangle ``tri`` at (b1, b2)."""
+    face = dr.gather(mi.Vector3u, geom.faces, tri, active)
+    p = [dr.gather(mi.Point3f, geom.positions, face[i], active) for i in range(3)]
+    hit = (1.0 - b1 - b2) * p[0] + b1 * p[1] + b2 * p[2]
+    shape = dr.gather(mi.UInt32, geom.shape_of, tri, active)
+    pi = dr.zeros(mi.PreliminaryIntersection3f, dr.width(tri))
+    pi.t = dr.select(active, dr.dot(hit - ray.o, ray.d), dr.inf)
+    pi.prim_uv = mi.Point2f(b1, b2)
+    pi.prim_index = tri - dr.gather(mi.UInt32, geom.first_face, shape, active)
+    pi.shape = dr.gather(mi.ShapePtr, geom.shapes, shape, active)
+    pi.valid = active
+    return pi

@@ -1,0 +1,207 @@
+"""`raster` with visibility="zbuffer" (issue 18): the same image as ray-traced visibility,
+the alpha test as fragment discard, the extremes of a rasteriser, bad input."""
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mi_displace.render import raster, zbuffer
+
+
+def make_mesh(name, vertices, faces, reflectance=(0.5, 0.5, 0.5), bsdf=None):
+    """A mi.Mesh from (V, 3) vertices and (F, 3) faces with a diffuse (or given) BSDF."""
+    props = mi.Properties()
+    props["bsdf"] = bsdf or mi.load_dict({"type": "diffuse", "reflectance": {
+        "type": "rgb", "value": list(reflectance)}})
+    vertices = np.asarray(vertices, np.float32)
+    faces = np.asarray(faces, np.uint32)
+    mesh = mi.Mesh(name, len(vertices), len(faces), props=props, has_vertex_normals=False)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(vertices.ravel())
+    params["faces"] = mi.UInt32(faces.ravel())
+    params.update()
+    return mesh
+
+
+def quad(name, corners, **kw):
+    return make_mesh(name, corners, [[0, 1, 2], [0, 2, 3]], **kw)
+
+
+def camera(res=(64, 64), kind="perspective", origin=(0, -5, 1.5), target=(0, 0, 0), **kw):
+    film = {"type": "hdrfilm", "width": res[0], "height": res[1], "rfilter": {"type": "box"}}
+    film.update(kw.pop("film", {}))
+    sensor = {"type": kind, "film": film, "to_world": mi.ScalarTransform4f().look_at(
+        origin=list(origin), target=list(target), up=[0, 0, 1])}
+    if kind == "perspective":
+        sensor["fov"] = 30
+    sensor.update(kw)
+    return sensor
+
+
+def displaced_sphere():
+    return {"type": "displaced", "base": "sphere", "resolution": 96, "scale": 0.08,
+            "height": {"type": "checkerboard", "to_uv": mi.ScalarTransform4f().scale([8, 4, 1])},
+            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.6, 0.5]}}}
+
+
+LIGHTS = {
+    "point": {"type": "point", "position": [3, -3, 4], "intensity": {"type": "rgb", "value": 40}},
+    "sun": {"type": "directional", "direction": [-1, 1, -1],
+            "irradiance": {"type": "rgb", "value": 0.5}},
+    "ambient": {"type": "constant", "radiance": {"type": "rgb", "value": 0.2}},
+}
+
+
+def load(shapes, sensor=None, lights=("point", "sun", "ambient"), **integrator):
+    d = {"type": "scene", "integrator": {"type": "raster", **integrator},
+         "sensor": sensor or camera()}
+    d.update({k: LIGHTS[k] for k in lights})
+    d.update(shapes)
+    return mi.load_dict(d)
+
+
+def render(scene, **options):
+    sensor = scene.sensors()[0]
+    aa = options.pop("aa", 1)
+    img = np.array(raster.render(scene, sensor, aa, options=raster.Options(**options)))
+    assert np.all(np.isfinite(img))
+    return img
+
+
+def sensor_of(kind):
+    if kind == "orthographic":
+        return camera(kind="orthographic", to_world=mi.ScalarTransform4f().look_at(
+            origin=[0, -5, 1.5], target=[0, 0, 0], up=[0, 0, 1]).scale([1.3, 1.3, 1]))
+    if kind == "crop":
+        return camera(res=(80, 48), film={"crop_offset_x": 20, "crop_offset_y": 8,
+                                          "crop_width": 40, "crop_height": 32})
+    return camera()
+
+
+@pytest.mark.parametrize("kind", ["perspective", "orthographic", "crop"])
+def test_zbuffer_matches_raytrace(variant, kind):
+    """Same triangle at (almost) every sample; the rest are pixel centres within float
+    rounding of an edge (the two methods compute barycentrics differently)."""
+    scene = load({"s": displaced_sphere()}, sensor_of(kind))
+    for aa in (1, 2):
+        ray = render(scene, aa=aa)
+        zb = render(scene, aa=aa, visibility="zbuffer")
+        assert ray.mean() > 0.05
+        differs = np.abs(zb - ray).max(axis=2) > 1e-3
+        assert differs.mean() < 2e-3
+        assert np.abs(zb - ray)[~differs].max() < 1e-4
+
+
+def test_zbuffer_is_bit_identical_between_runs(variant):
+    scene = load({"s": displaced_sphere()})
+    first = render(scene, aa=2, visibility="zbuffer", shadows="map")
+    assert np.array_equal(first, render(scene, aa=2, visibility="zbuffer", shadows="map"))
+
+
+def card(opacity, y=-4.0):
+    """A 0.3-wide card between camera and sphere, off every shadow ray."""
+    s = 0.15
+    corners = [[-s, y, 1.2 - s], [s, y, 1.2 - s], [s, y, 1.2 + s], [-s, y, 1.2 + s]]
+    bsdf = mi.load_dict({"type": "mask", "opacity": {"type": "rgb", "value": opacity},
+                         "bsdf": {"type": "diffuse"}})
+    return quad("card", corners, bsdf=bsdf)
+
+
+def test_alpha_test_is_a_fragment_discard(variant):
+    bare = render(load({"s": displaced_sphere()}), visibility="zbuffer")
+    for opacity, hidden in ((0.0, False), (0.3, False), (1.0, True)):
+        scene = load({"s": displaced_sphere(), "card": card(opacity)})
+        zb = render(scene, visibility="zbuffer")
+        ray = render(scene)
+        change = np.mean(np.abs(zb - bare))
+        assert (change > 1e-2) if hidden else (change < 1e-6), opacity
+        assert np.mean(np.abs(zb - ray).max(axis=2) > 1e-3) < 2e-3
+
+
+def test_triangles_behind_and_across_the_near_plane(variant):
+    """A ground plane running from behind the camera to the horizon, a red quad behind the
+    camera (must not appear), a zero-area triangle (draws nothing)."""
+    ground = quad("ground", [[-50, -50, -1], [50, -50, -1], [50, 50, -1], [-50, 50, -1]])
+    behind = quad("behind", [[-3, -9, 0], [3, -9, 0], [3, -9, 3], [-3, -9, 3]],
+                  reflectance=(1, 0, 0))
+    degenerate = make_mesh("degenerate", [[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2]],
+                           reflectance=(0, 1, 0))
+    scene = load({"ground": ground, "behind": behind, "degenerate": degenerate},
+                 camera(origin=(0, -5, 0.2), target=(0, 0, 0)), lights=("sun", "ambient"))
+    ray = render(scene)
+    zb = render(scene, visibility="zbuffer")
+    ground_px = np.abs(ray - 0.2).max(axis=2) > 1e-3
+    assert 0.2 < ground_px.mean() < 0.95  # the plane reaches the image's bottom edge
+    assert np.mean(np.abs(zb - ray).max(axis=2) > 1e-3) < 2e-3
+    assert np.all(zb[..., 0] <= zb[..., 1] + 1e-6)  # no red from behind the camera
+
+
+def test_screen_covering_and_tiny_films(variant):
+    wall = quad("wall", [[-40, 2, -40], [40, 2, -40], [40, 2, 40], [-40, 2, 40]])
+    for res in ((64, 48), (1, 1)):
+        scene = load({"wall": wall}, camera(res=res, origin=(0, -5, 0)), lights=("ambient",))
+        zb = render(scene, visibility="zbuffer")
+        assert zb.shape == (res[1], res[0], 3)
+        assert np.allclose(zb, 0.1)  # albedo 0.5 x ambient 0.2 at every pixel
+
+
+def test_film_too_large_is_refused_before_allocation(variant):
+    scene = load({"s": displaced_sphere()}, camera(res=(16384, 16384)), lights=("ambient",))
+    with pytest.raises(ValueError, match="16384x16384 film"):
+        render(scene, visibility="zbuffer")
+
+
+def test_depth_ties_go_to_the_first_triangle(variant):
+    """Two coincident quads: the smaller triangle id (the first shape) wins every sample."""
+    corners = [[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]]
+    shapes = {"a": quad("a", corners, reflectance=(1, 0, 0)),
+              "b": quad("b", corners, reflectance=(0, 0, 1))}
+    scene = load(shapes, camera(origin=(0, -5, 0)), lights=("ambient",))
+    zb = render(scene, visibility="zbuffer")
+    on = ~np.all(np.abs(zb - 0.2) < 1e-6, axis=2)  # not the environment
+    assert on.mean() > 0.05
+    first = 0 if scene.shapes()[0].id() == "a" else 2
+    assert np.all(zb[on][:, first] > 0.19) and np.all(zb[on][:, 2 - first] < 1e-6)
+    assert np.array_equal(zb, render(scene, visibility="zbuffer"))
+
+
+def test_distant_geometry_keeps_depth_order(variant):
+    """Two quads a million units away, 10 units apart, near clip 1e-2: linear float32
+    depth resolves them (relative gap 1e-5 >> 2^-24); a [0, 1] depth with this near/far
+    ratio would not."""
+    far = 1e6
+    size = 0.5 * far  # wider than the 30-degree view
+
+    def wall(name, y, colour):
+        return quad(name, [[-size, y, -size], [size, y, -size], [size, y, size], [-size, y, size]],
+                    reflectance=colour)
+    shapes = {"back": wall("back", far, (1, 0, 0)), "front": wall("front", far - 10, (0, 0, 1))}
+    sensor = camera(origin=(0, 0, 0), target=(0, 1, 0), near_clip=1e-2, far_clip=1e7)
+    zb = render(load(shapes, sensor, lights=("ambient",)), visibility="zbuffer")
+    assert np.all(zb[..., 2] > 0.09) and np.all(zb[..., 0] < 1e-6)
+
+
+def test_bad_options(variant):
+    scene = load({"s": displaced_sphere()})
+    with pytest.raises(ValueError, match="'visibility'"):
+        render(scene, visibility="scanline")
+    with pytest.raises(ValueError, match="'shadows'"):
+        render(scene, shadows="soft")
+    with pytest.raises(ValueError, match="'shadow_resolution'"):
+        render(scene, shadows="map", shadow_resolution=0)
+    with pytest.raises(ValueError, match="shadow_bias"):
+        render(scene, shadows="map", shadow_bias=float("nan"))
+    with pytest.raises(ValueError, match="explicit 'shapes'"):
+        raster.render(scene, scene.sensors()[0], shapes=list(scene.shapes()))
+    analytic = load({"ball": {"type": "sphere"}})
+    with pytest.raises(ValueError, match="triangle meshes only"):
+        render(analytic, visibility="zbuffer")
+    with pytest.raises(Exception, match="'visibility'"):
+        load({"s": displaced_sphere()}, visibility="scanline")
+
+
+def test_empty_scene_shows_the_environment(variant):
+    """No triangles at all: every sample misses, as under ray tracing."""
+    scene = load({}, lights=("point", "sun", "ambient"))
+    zb = render(scene, visibility="zbuffer", shadows="map")
+    assert np.array_equal(zb, render(scene)) and np.allclose(zb, 0.2)
