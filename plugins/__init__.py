@@ -20,6 +20,7 @@ PLUGIN_MODULES = [
     "mi_displace.plugins.horizon",
     "mi_displace.plugins.relief",
     "mi_displace.plugins.restored",
+    "mi_displace.plugins.slicing",
 ]
 
 _registered_for: str | None = None
