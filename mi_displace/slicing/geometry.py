@@ -32,13 +32,15 @@ import numpy as np
 
 from mi_displace.core import surfaces, tessellate
 from mi_displace.core.mesh_io import load_uv_mesh
+from mi_displace.slicing.trace import SPAWN_EPS
 
 #: Most slice triangles one object may build (memory guard, ~100 bytes each).
 MAX_SLICE_TRIANGLES = 8_000_000
 #: Largest slice count per family (the issue's extreme).
 MAX_SLICES = 4096
-#: Relative offset of the proxy walls outside the slices (fraction of ``scale``).
-WALL_EPS = 1e-3
+#: Offset of the proxy walls outside the slices: this fraction of ``scale``, and at least
+#: four slice-walk offsets (:data:`mi_displace.slicing.trace.SPAWN_EPS`).
+WALL_EPS = 2e-3
 ATTRIBUTES = ("rw", "bn", "su", "sv")
 
 
@@ -271,7 +273,9 @@ def volume_walls(bm: BaseMesh, scale: float) -> SliceMesh:
     """The boundary of the displacement volume, slightly outside the slices: top at
     h = 1 + ε, bottom at h = -ε (wound inwards), quads on the open edges; wall flag 1 and
     outward normals, so a ray enters where it meets a wall's front face."""
-    eps = WALL_EPS
+    lo_box, hi_box = bm.bbox(scale)
+    reach = 1 + float(np.max(np.abs(np.concatenate([lo_box, hi_box]))))
+    eps = max(WALL_EPS, 4 * SPAWN_EPS * reach / scale)
     top = SliceMesh(*_vertex_data(bm, scale * (1 + eps), 1.0, 1.0), bm.faces)
     bottom = SliceMesh(*_vertex_data(bm, -scale * eps, 0.0, 1.0, 1.0), bm.faces[:, ::-1])
     parts = [top, bottom]

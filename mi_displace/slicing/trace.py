@@ -25,6 +25,17 @@ import mitsuba as mi
 #: α-test of §3.1 (``basic``: D >= h_α, zero heights drawn) and §3.2 (``ramp``: D - h_α > 0,
 #: zero heights masked out).
 ALPHA_TESTS = ("basic", "ramp")
+#: Offset [x (1 + max |p|) world units] that moves a walk off the polygon it just met.
+#: Mitsuba's spawn_ray uses ~9e-5, which would skip slices closer than that.
+SPAWN_EPS = 1e-5
+
+
+def spawn(si: mi.SurfaceInteraction3f, d: mi.Vector3f) -> mi.Ray3f:
+    """The ray going on along ``d`` just past the polygon of ``si`` (offset along its
+    geometric normal, :data:`SPAWN_EPS`)."""
+    offset = SPAWN_EPS * (1 + dr.max(dr.abs(si.p)))
+    side = dr.select(dr.dot(d, si.n) > 0, 1.0, -1.0)
+    return mi.Ray3f(si.p + si.n * (side * offset), d)
 
 
 def alpha_test(kind: str, D: mi.Float, h_alpha: mi.Float) -> mi.Bool:
@@ -75,7 +86,7 @@ def first_passing_slice(scene: mi.Scene, origin: mi.Point3f, d: mi.Vector3f,
         start = dr.select(passes, ray.o, start)
         found |= passes
         going = valid & ~passes & ~leaving & (i + 1 < max_iter)
-        ray = dr.select(going, si.spawn_ray(ray.d), ray)
+        ray = dr.select(going, spawn(si, ray.d), ray)
         return i + 1, ray, found, going, start, t_enter, t_exit, bottom
 
     state = (mi.UInt32(0), mi.Ray3f(origin, d), dr.zeros(mi.Bool, n), mi.Bool(active),
