@@ -51,19 +51,31 @@ class SlicingBSDF(MesostructureBSDF):
     def __init__(self, props: mi.Properties, volume: SlicedVolume):
         super().__init__(props)
         self.volume = volume
-        self.proxy = None   # the slicing shape (its vertex attributes), set by the shape
+        self._cache = None
 
     def _facing(self, w):
         # the proxy is the volume's boundary: the fragment's own normal decides (nested BSDF)
         return dr.full(mi.Bool, True, dr.width(w))
 
     def _prepare(self, si, active):
+        # Mitsuba asks eval, eval_null_transmission and eval_diffuse_reflectance of the same
+        # interaction in one kernel: walk the slices once per interaction (all valid lanes,
+        # so a later call's mask is always covered); the cache keeps si's variables alive,
+        # so their JIT indices cannot be reused by another interaction.
+        key = (si.t.index, si.p.x.index, si.wi.x.index)
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[2]
+        result = self._walk(si, si.is_valid())
+        self._cache = (key, (si.t, si.p, si.wi), result)
+        return result
+
+    def _walk(self, si, active):
         active = mi.Bool(active)
         wi = si.to_world(si.wi)
         origin, d = si.p + wi * si.t, -wi   # the ray's own origin: a camera inside works too
-        attr = [mi.Vector3f(self.proxy.eval_attribute_3(f"vertex_{k}", si, active))
-                for k in ("bn", "su", "sv")]
-        choice = self.volume.choose(d, dr.normalize(attr[0]), attr[1], attr[2])
+        third = dr.full(mi.Float, 1 / 3, dr.width(si.t))   # the proxy face's centre (faces
+        bn, su, sv = self.volume.walls_scene.frame(si.prim_index, (third, third), active)  # = walls)
+        choice = self.volume.choose(d, dr.normalize(bn), su, sv)
         hit = self.volume.find(origin, d, choice, active)
         normal = self.volume.normal(hit)
         si2 = shading_interaction(si, hit.uv, normal, hit.su)
@@ -142,7 +154,6 @@ class Slicing(mi.Mesh):
         super().__init__(props.id() or "slicing", len(walls.positions), len(walls.faces), props,
                          False, True)
         geo.fill_mesh(self, walls)
-        bsdf.proxy = self
         self.volume = volume
         self.build_stats = {**volume.stats, "slices_auto": auto, "build_s": time.perf_counter() - start}
 

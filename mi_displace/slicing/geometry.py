@@ -301,24 +301,61 @@ def volume_walls(bm: BaseMesh, scale: float) -> SliceMesh:
 
 
 def fill_mesh(mesh: mi.Mesh, sm: SliceMesh) -> None:
-    """Write ``sm`` into a ``mi.Mesh`` created with its vertex / face counts (texcoords on,
-    no vertex normals: the shading frame is the face's, so wi.z > 0 on front faces)."""
+    """Write the triangles of ``sm`` into a ``mi.Mesh`` created with its vertex / face
+    counts (texcoords on, no vertex normals: the shading frame is the face's)."""
     params = mi.traverse(mesh)
     params["vertex_positions"] = mi.Float(sm.positions.astype(np.float32).ravel())
     params["vertex_texcoords"] = mi.Float(sm.uvs.astype(np.float32).ravel())
     params["faces"] = mi.UInt32(sm.faces.astype(np.uint32).ravel())
     params.update()
-    for name in ATTRIBUTES:
-        mesh.add_attribute(f"vertex_{name}", 3, mi.Float(getattr(sm, name).astype(np.float32).ravel()))
 
 
-def private_scene(sm: SliceMesh, name: str) -> mi.Scene:
-    """A scene of its own holding ``sm`` (the slices a BSDF traces; not seen by Mitsuba's
-    integrators, so their shadow rays meet only the volume's walls)."""
-    mesh = mi.Mesh(name, len(sm.positions), len(sm.faces), has_vertex_normals=False,
-                   has_vertex_texcoords=True)
-    fill_mesh(mesh, sm)
-    return mi.load_dict({"type": "scene", "slices": mesh})
+class SliceScene:
+    """Slice polygons in a scene of their own (not seen by Mitsuba's integrators, so their
+    shadow rays meet only the volume's walls) with the slice attributes as Dr.Jit buffers,
+    interpolated from preliminary intersections (cheaper than Mitsuba's full interaction).
+
+    Attributes: scene; faces (3 x UInt32 per face); uv, ramp, bn, su, sv (per vertex);
+    flags (per face: 1 wall, 2 bottom wall); fn (per-face unit geometric normal).
+    """
+
+    def __init__(self, sm: SliceMesh, name: str):
+        mesh = mi.Mesh(name, len(sm.positions), len(sm.faces), has_vertex_normals=False,
+                       has_vertex_texcoords=True)
+        fill_mesh(mesh, sm)
+        self.scene = mi.load_dict({"type": "scene", "slices": mesh})
+        f32 = lambda a: mi.Float(np.ascontiguousarray(a, np.float32).ravel())
+        self.faces = mi.UInt32(sm.faces.astype(np.uint32).ravel())
+        self.uv, self.ramp = f32(sm.uvs), f32(sm.rw[:, 0])
+        self.bn, self.su, self.sv = f32(sm.bn), f32(sm.su), f32(sm.sv)
+        first = sm.rw[sm.faces[:, 0]]
+        self.flags = mi.UInt32((first[:, 1] > 0.5).astype(np.uint32) + 2 * (first[:, 2] > 0.5).astype(np.uint32))
+        p = sm.positions[sm.faces]
+        fn = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        self.fn = f32(fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-30))
+        self.triangles = len(sm.faces)
+
+    def corners(self, prim: mi.UInt32, active):
+        """The three vertex indices of faces ``prim``."""
+        return [dr.gather(mi.UInt32, self.faces, 3 * prim + k, active) for k in range(3)]
+
+    def lerp(self, buf: mi.Float, dim: int, idx, bary, active):
+        """Barycentric interpolation of a per-vertex buffer with ``dim`` components."""
+        b0, b1 = bary
+        w = (1 - b0 - b1, b0, b1)
+        out = [dr.zeros(mi.Float, dr.width(b0)) for _ in range(dim)]
+        for v, wk in zip(idx, w):
+            for c in range(dim):
+                out[c] += wk * dr.gather(mi.Float, buf, dim * v + c, active)
+        return out
+
+    def face_normal(self, prim, active) -> mi.Vector3f:
+        return mi.Vector3f(*[dr.gather(mi.Float, self.fn, 3 * prim + c, active) for c in range(3)])
+
+    def frame(self, prim, bary, active):
+        """(bn, su, sv) interpolated at a hit (base normal unnormalised, tangents)."""
+        idx = self.corners(prim, active)
+        return tuple(mi.Vector3f(*self.lerp(b, 3, idx, bary, active)) for b in (self.bn, self.su, self.sv))
 
 
 # ---------------------------------------------------------------------------------------

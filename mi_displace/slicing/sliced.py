@@ -1,7 +1,7 @@
 """A displaced surface drawn as slices through its displacement volume (§3).
 
 :class:`SlicedVolume` owns the slice polygons of each slicing direction as private scenes
-(:func:`mi_displace.slicing.geometry.private_scene`) and answers, per ray, where the front-
+(:class:`mi_displace.slicing.geometry.SliceScene`) and answers, per ray, where the front-
 most slice fragment that passes the α-test lies (:meth:`SlicedVolume.find`) and whether the
 slices occlude a light from a point (:meth:`SlicedVolume.occluded`).
 
@@ -89,10 +89,10 @@ class SlicedVolume:
                 sm = geo.orthogonal_slices(bm, scale, axis, geo.orthogonal_levels(bm, axis, self.counts[fam]))
             tris += sm.triangles
             nbytes += sm.nbytes()
-            self.families[fam] = (geo.private_scene(geo.concat([sm, walls]), f"slices_{fam}"),
+            self.families[fam] = (geo.SliceScene(geo.concat([sm, walls]), f"slices_{fam}"),
                                   4 * self.counts[fam] + 64)
+        self.walls_scene = geo.SliceScene(walls, "walls")   # also the proxy's face frames
         if direction == "screen":
-            self.walls_scene = geo.private_scene(walls, "walls")
             self.delta = self.scale / slices
             self.inv_world = mi.Transform4f(mi.ScalarTransform4f(mi.ScalarMatrix4f(
                 np.linalg.inv(bm.to_world).astype(np.float32))))
@@ -113,8 +113,8 @@ class SlicedVolume:
         si.uv = uv
         return dr.clip(self.height.eval_1(si), 0.0, 1.0)
 
-    def _test(self, si, h_alpha):
-        return alpha_test(self.alpha, self.D(si.uv), h_alpha)
+    def _test(self, uv, h_alpha):
+        return alpha_test(self.alpha, self.D(uv), h_alpha)
 
     # -- families ------------------------------------------------------------------------
     def choose(self, d: mi.Vector3f, n: mi.Vector3f, su: mi.Vector3f, sv: mi.Vector3f) -> mi.UInt32:
@@ -145,25 +145,25 @@ class SlicedVolume:
         hit = Hit(found, mi.Point3f(origin), dr.zeros(mi.Point2f, n), dr.zeros(mi.Vector3f, n),
                   dr.zeros(mi.Vector3f, n), dr.zeros(mi.Vector3f, n))
         for index, fam in enumerate(FAMILIES[self.direction]):
-            scene, max_iter = self.families[fam]
+            slices, max_iter = self.families[fam]
             mine = active & (choice == index)
-            ok, start, *_ = first_passing_slice(scene, origin, d, self._test, mine, max_iter,
-                                                self.opaque_base)
-            si = scene.ray_intersect(mi.Ray3f(start, d), ok)
-            mesh = scene.shapes()[0]
+            ok, t, prim, bary, *_ = first_passing_slice(slices, origin, d, self._test, mine,
+                                                        max_iter, self.opaque_base)
+            idx = slices.corners(prim, ok)
+            uv = mi.Point2f(*slices.lerp(slices.uv, 2, idx, bary, ok))
+            bn, su, sv = slices.frame(prim, bary, ok)
             hit.found |= ok
-            hit.p = dr.select(ok, si.p, hit.p)
-            hit.uv = dr.select(ok, si.uv, hit.uv)
-            for name in ("n", "su", "sv"):
-                attr = mesh.eval_attribute_3(f"vertex_{'bn' if name == 'n' else name}", si, ok)
-                setattr(hit, name, dr.select(ok, mi.Vector3f(attr), getattr(hit, name)))
+            hit.p = dr.select(ok, origin + t * d, hit.p)
+            hit.uv = dr.select(ok, uv, hit.uv)
+            hit.n, hit.su, hit.sv = (dr.select(ok, new, old) for new, old in
+                                     ((bn, hit.n), (su, hit.su), (sv, hit.sv)))
         hit.n = dr.normalize(hit.n)
         return hit
 
     def _find_screen(self, origin, d, active):
         """§3.3: planes p . d = k delta clipped to the volume (the base's exact coordinates)."""
-        never = lambda si, h: dr.zeros(mi.Bool, dr.width(h))
-        _, _, t_in, t_out, bottom = first_passing_slice(self.walls_scene, origin, d, never, active, 64)
+        never = lambda uv, h: dr.zeros(mi.Bool, dr.width(h))
+        *_, t_in, t_out, bottom = first_passing_slice(self.walls_scene, origin, d, never, active, 64)
         t_out = dr.select(dr.isinf(t_out), t_in, t_out)
         base = self.bm.base
 

@@ -30,12 +30,12 @@ ALPHA_TESTS = ("basic", "ramp")
 SPAWN_EPS = 1e-5
 
 
-def spawn(si: mi.SurfaceInteraction3f, d: mi.Vector3f) -> mi.Ray3f:
-    """The ray going on along ``d`` just past the polygon of ``si`` (offset along its
-    geometric normal, :data:`SPAWN_EPS`)."""
-    offset = SPAWN_EPS * (1 + dr.max(dr.abs(si.p)))
-    side = dr.select(dr.dot(d, si.n) > 0, 1.0, -1.0)
-    return mi.Ray3f(si.p + si.n * (side * offset), d)
+def spawn(p: mi.Point3f, n: mi.Vector3f, d: mi.Vector3f) -> mi.Ray3f:
+    """The ray going on along ``d`` just past the polygon through ``p`` with unit normal
+    ``n`` (offset along n to d's side, :data:`SPAWN_EPS`)."""
+    offset = SPAWN_EPS * (1 + dr.max(dr.abs(p)))
+    side = dr.select(dr.dot(d, n) > 0, 1.0, -1.0)
+    return mi.Ray3f(p + n * (side * offset), d)
 
 
 def alpha_test(kind: str, D: mi.Float, h_alpha: mi.Float) -> mi.Bool:
@@ -45,11 +45,11 @@ def alpha_test(kind: str, D: mi.Float, h_alpha: mi.Float) -> mi.Bool:
     return D - h_alpha > 0
 
 
-def first_passing_slice(scene: mi.Scene, origin: mi.Point3f, d: mi.Vector3f,
-                        test: Callable[[mi.SurfaceInteraction3f, mi.Float], mi.Bool],
+def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
+                        test: Callable[[mi.Point2f, mi.Float], mi.Bool],
                         active: mi.Bool, max_iter: int, opaque_base: bool = False):
-    """Walk the slice polygons of ``scene`` (one mesh, attributes of
-    :mod:`mi_displace.slicing.geometry`) from ``origin`` along unit ``d``.
+    """Walk the slice polygons of ``slices`` (a :class:`mi_displace.slicing.geometry.SliceScene`)
+    from ``origin`` along unit ``d``.
 
     Walls (the volume boundary) are passed when entered; the walk stops at the first
     passing slice fragment, at the first wall the ray leaves through, at a miss, or after
@@ -57,46 +57,58 @@ def first_passing_slice(scene: mi.Scene, origin: mi.Point3f, d: mi.Vector3f,
     passing fragment when the ray leaves through it (the base polygons drawn as well).
 
     Args:
-        test: ``test(si, h_alpha) -> Bool``, the α-test of a slice fragment.
+        test: ``test(uv, h_alpha) -> Bool``, the α-test of a slice fragment.
 
     Returns:
-        ``(found, start, t_enter, t_exit, bottom)``: ``start`` is the origin of the ray that found
-        the fragment (re-trace ``Ray3f(start, d)`` for its interaction); ``t_enter`` the
-        distance to the first wall entered (0 if the walk starts inside), ``t_exit`` to the
-        wall left (inf on a miss), both from ``origin``; ``bottom``: that wall is the bottom.
+        ``(found, t, prim, bary, t_enter, t_exit, bottom)``: distance, face and barycentrics
+        of the fragment found; ``t_enter`` the distance to the first wall entered (0 if the
+        walk starts inside), ``t_exit`` to the wall left (inf on a miss), both from
+        ``origin``; ``bottom``: that wall is the bottom.
     """
-    mesh = scene.shapes()[0]
+    scene = slices.scene
     n = dr.width(origin)
     inf = dr.full(mi.Float, dr.inf, n)
 
-    def body(i, ray, found, going, start, t_enter, t_exit, bottom):
-        si = scene.ray_intersect(ray, going)
-        valid = going & si.is_valid()
-        rw = mesh.eval_attribute_3("vertex_rw", si, valid)
-        wall = rw.y > 0.5
-        leaving = valid & wall & (dr.dot(ray.d, si.n) > 0)
+    def body(i, ray, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom):
+        pi = scene.ray_intersect_preliminary(ray, going)
+        valid = going & pi.is_valid()
+        face = pi.prim_index
+        flags = dr.gather(mi.UInt32, slices.flags, face, valid)
+        fn = slices.face_normal(face, valid)
+        wall = (flags & 1) != 0
+        leaving = valid & wall & (dr.dot(ray.d, fn) > 0)
         entering = valid & wall & ~leaving
-        t = dr.dot(si.p - origin, d)
+        p = ray.o + pi.t * ray.d
+        t = dr.dot(p - origin, d)
         t_enter = dr.select(entering & (t_enter == dr.inf) & (t_exit == dr.inf), t, t_enter)
         t_exit = dr.select(leaving, t, t_exit)
-        bottom = leaving & (rw.z > 0.5)
-        passes = valid & ~wall & test(si, rw.x)
+        bottom = leaving & ((flags & 2) != 0)
+        idx = slices.corners(face, valid)
+        bary = (pi.prim_uv.x, pi.prim_uv.y)
+        uv = mi.Point2f(*slices.lerp(slices.uv, 2, idx, bary, valid))
+        ramp = slices.lerp(slices.ramp, 1, idx, bary, valid)[0]
+        passes = valid & ~wall & test(uv, ramp)
         if opaque_base:
             passes |= bottom
-        start = dr.select(passes, ray.o, start)
+        t_hit = dr.select(passes, t, t_hit)
+        prim = dr.select(passes, face, prim)
+        b0, b1 = dr.select(passes, bary[0], b0), dr.select(passes, bary[1], b1)
         found |= passes
         going = valid & ~passes & ~leaving & (i + 1 < max_iter)
-        ray = dr.select(going, spawn(si, ray.d), ray)
-        return i + 1, ray, found, going, start, t_enter, t_exit, bottom
+        ray = dr.select(going, spawn(p, fn, ray.d), ray)
+        return i + 1, ray, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom
 
+    zero = dr.zeros(mi.Float, n)
     state = (mi.UInt32(0), mi.Ray3f(origin, d), dr.zeros(mi.Bool, n), mi.Bool(active),
-             mi.Point3f(origin), mi.Float(inf), mi.Float(inf), dr.zeros(mi.Bool, n))
-    _, _, found, _, start, t_enter, t_exit, bottom = dr.while_loop(
+             mi.Float(zero), dr.zeros(mi.UInt32, n), mi.Float(zero), mi.Float(zero),
+             mi.Float(inf), mi.Float(inf), dr.zeros(mi.Bool, n))
+    _, _, found, _, t_hit, prim, b0, b1, t_enter, t_exit, bottom = dr.while_loop(
         state=state, cond=lambda i, ray, found, going, *_: going, body=body,
-        labels=("i", "ray", "found", "going", "start", "t_enter", "t_exit", "bottom"),
+        labels=("i", "ray", "found", "going", "t_hit", "prim", "b0", "b1", "t_enter",
+                "t_exit", "bottom"),
         label="slicing_polygons")
     t_enter = dr.select(t_enter == dr.inf, 0.0, dr.minimum(t_enter, t_exit))
-    return found, start, t_enter, t_exit, bottom
+    return found, t_hit, prim, (b0, b1), t_enter, t_exit, bottom
 
 
 def first_passing_plane(o: mi.Point3f, d: mi.Vector3f, m: mi.Vector3f, c, delta: float,
