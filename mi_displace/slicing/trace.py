@@ -30,12 +30,12 @@ ALPHA_TESTS = ("basic", "ramp")
 SPAWN_EPS = 1e-5
 
 
-def spawn(p: mi.Point3f, n: mi.Vector3f, d: mi.Vector3f) -> mi.Ray3f:
-    """The ray going on along ``d`` just past the polygon through ``p`` with unit normal
-    ``n`` (offset along n to d's side, :data:`SPAWN_EPS`)."""
+def step_past(p: mi.Point3f, n: mi.Vector3f, d: mi.Vector3f) -> mi.Float:
+    """Distance along unit ``d`` that leaves the polygon through ``p`` (unit normal ``n``)
+    behind by :data:`SPAWN_EPS` x (1 + max |p|) along its normal.  Walks stay on the ray's
+    line (a normal offset per slice would drift the ray sideways over thousands of slices)."""
     offset = SPAWN_EPS * (1 + dr.max(dr.abs(p)))
-    side = dr.select(dr.dot(d, n) > 0, 1.0, -1.0)
-    return mi.Ray3f(p + n * (side * offset), d)
+    return offset / dr.maximum(dr.abs(dr.dot(d, n)), 1e-3)
 
 
 def alpha_test(kind: str, D: mi.Float, h_alpha: mi.Float) -> mi.Bool:
@@ -67,9 +67,10 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
     """
     scene = slices.scene
     n = dr.width(origin)
-    inf = dr.full(mi.Float, dr.inf, n)
+    inf, zero = dr.full(mi.Float, dr.inf, n), dr.zeros(mi.Float, n)
 
-    def body(i, ray, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom):
+    def body(i, t_acc, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom):
+        ray = mi.Ray3f(origin + t_acc * d, d)
         pi = scene.ray_intersect_preliminary(ray, going)
         valid = going & pi.is_valid()
         face = pi.prim_index
@@ -78,8 +79,8 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
         wall = (flags & 1) != 0
         leaving = valid & wall & (dr.dot(ray.d, fn) > 0)
         entering = valid & wall & ~leaving
-        p = ray.o + pi.t * ray.d
-        t = dr.dot(p - origin, d)
+        t = t_acc + pi.t
+        p = origin + t * d
         t_enter = dr.select(entering & (t_enter == dr.inf) & (t_exit == dr.inf), t, t_enter)
         t_exit = dr.select(leaving, t, t_exit)
         bottom = leaving & ((flags & 2) != 0)
@@ -95,16 +96,15 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
         b0, b1 = dr.select(passes, bary[0], b0), dr.select(passes, bary[1], b1)
         found |= passes
         going = valid & ~passes & ~leaving & (i + 1 < max_iter)
-        ray = dr.select(going, spawn(p, fn, ray.d), ray)
-        return i + 1, ray, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom
+        t_acc = dr.select(going, t + step_past(p, fn, d), t_acc)
+        return i + 1, t_acc, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom
 
-    zero = dr.zeros(mi.Float, n)
-    state = (mi.UInt32(0), mi.Ray3f(origin, d), dr.zeros(mi.Bool, n), mi.Bool(active),
+    state = (mi.UInt32(0), mi.Float(zero), dr.zeros(mi.Bool, n), mi.Bool(active),
              mi.Float(zero), dr.zeros(mi.UInt32, n), mi.Float(zero), mi.Float(zero),
              mi.Float(inf), mi.Float(inf), dr.zeros(mi.Bool, n))
     _, _, found, _, t_hit, prim, b0, b1, t_enter, t_exit, bottom = dr.while_loop(
         state=state, cond=lambda i, ray, found, going, *_: going, body=body,
-        labels=("i", "ray", "found", "going", "t_hit", "prim", "b0", "b1", "t_enter",
+        labels=("i", "t_acc", "found", "going", "t_hit", "prim", "b0", "b1", "t_enter",
                 "t_exit", "bottom"),
         label="slicing_polygons")
     t_enter = dr.select(t_enter == dr.inf, 0.0, dr.minimum(t_enter, t_exit))
