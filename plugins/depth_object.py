@@ -26,7 +26,7 @@ import numpy as np
 
 from mi_displace.core.mesh_io import resolve_path
 from mi_displace.plugins.slicing import SlicingBSDF, _slice_count
-from mi_displace.plugins.vdm import MesostructureBSDF, nested_objects
+from mi_displace.plugins.vdm import nested_objects
 from mi_displace.slicing import depth_object as dobj
 from mi_displace.vdm.frame import shading_interaction
 
@@ -61,23 +61,17 @@ class ViewColour(mi.Texture):
         pass
 
 
-class DepthObjectBSDF(MesostructureBSDF):
-    """The depth object seen through its cube."""
+class DepthObjectBSDF(SlicingBSDF):
+    """The depth object seen through its cube (``self.model``: a DepthObject)."""
 
     PLUGIN = "depth_object"
-    HAS_SILHOUETTE = True
-    _facing = SlicingBSDF._facing
 
-    def __init__(self, props: mi.Properties, obj: dobj.DepthObject):
-        super().__init__(props)
-        self.obj = obj
-
-    def _prepare(self, si, active):
+    def _walk(self, si, active):
         active = mi.Bool(active)
         wi = si.to_world(si.wi)
         origin, d = si.p + wi * si.t, -wi
-        found, p = self.obj.find(origin, d, active)
-        normal = self.obj.normal(p, d)
+        found, p = self.model.find(origin, d, active)
+        normal = self.model.normal(p, d)
         normal = dr.select(dr.dot(normal, d) > 0, -normal, normal)
         si2 = shading_interaction(si, si.uv, normal, dr.cross(normal, mi.Vector3f(0.31, 0.53, 0.79)))
         si2.p = p
@@ -85,10 +79,8 @@ class DepthObjectBSDF(MesostructureBSDF):
 
     def _lit(self, state, wo_world):
         p, normal = state
-        return ~self.obj.occluded(p, normal, wo_world, dr.dot(normal, wo_world) > 0)
+        return ~self.model.occluded(p, normal, wo_world, dr.dot(normal, wo_world) > 0)
 
-    def to_string(self):
-        return f"DepthObjectBSDF[{self.obj.stats}]"
 
 
 def _cube(center, half):

@@ -43,14 +43,17 @@ from mi_displace.vdm.frame import shading_interaction
 
 
 class SlicingBSDF(MesostructureBSDF):
-    """The α-tested slices of a :class:`SlicedVolume` seen through the volume's walls."""
+    """The α-tested slices of a :class:`SlicedVolume` seen through the volume's walls.
+
+    Subclasses implement ``_walk(si, active)`` (the ``_prepare`` of MesostructureBSDF,
+    computed once per interaction) and ``_lit``."""
 
     PLUGIN = "slicing"
     HAS_SILHOUETTE = True
 
-    def __init__(self, props: mi.Properties, volume: SlicedVolume):
+    def __init__(self, props: mi.Properties, model):
         super().__init__(props)
-        self.volume = volume
+        self.model = model   # a SlicedVolume (or a DepthObject in the subclass)
         self._cache = None
 
     def _facing(self, w):
@@ -74,20 +77,20 @@ class SlicingBSDF(MesostructureBSDF):
         wi = si.to_world(si.wi)
         origin, d = si.p + wi * si.t, -wi   # the ray's own origin: a camera inside works too
         third = dr.full(mi.Float, 1 / 3, dr.width(si.t))   # the proxy face's centre (faces
-        bn, su, sv = self.volume.walls_scene.frame(si.prim_index, (third, third), active)  # = walls)
-        choice = self.volume.choose(d, dr.normalize(bn), su, sv)
-        hit = self.volume.find(origin, d, choice, active)
-        normal = self.volume.normal(hit)
+        bn, su, sv = self.model.walls_scene.frame(si.prim_index, (third, third), active)  # = walls)
+        choice = self.model.choose(d, dr.normalize(bn), su, sv)
+        hit = self.model.find(origin, d, choice, active)
+        normal = self.model.normal(hit)
         si2 = shading_interaction(si, hit.uv, normal, hit.su)
         si2.p = hit.p
         return (hit, normal), active & ~hit.found, si2
 
     def _lit(self, state, wo_world):
         hit, normal = state
-        return ~self.volume.occluded(hit, normal, wo_world, hit.found & (dr.dot(normal, wo_world) > 0))
+        return ~self.model.occluded(hit, normal, wo_world, hit.found & (dr.dot(normal, wo_world) > 0))
 
     def to_string(self):
-        return f"SlicingBSDF[{self.volume.stats}]"
+        return f"{type(self).__name__}[{self.model.stats}]"
 
 
 def _slice_count(props: mi.Properties):
@@ -154,7 +157,7 @@ class Slicing(mi.Mesh):
         super().__init__(props.id() or "slicing", len(walls.positions), len(walls.faces), props,
                          False, True)
         geo.fill_mesh(self, walls)
-        self.volume = volume
+        self.model = volume
         self.build_stats = {**volume.stats, "slices_auto": auto, "build_s": time.perf_counter() - start}
 
     def to_string(self):

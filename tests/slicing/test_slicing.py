@@ -180,6 +180,7 @@ def test_mesh_base_equals_parametric_plane(variant, helpers, tmp_path):
         assert flip(a, b)[0] < 0.01, direction
 
 
+@pytest.mark.slow
 def test_torus_is_finite_and_close_to_displaced(variant, helpers):
     sensor = helpers.look([0, -3.6, 2.4], [0, 0, 0], fov=35, res=48)
     height = {"type": "cells", "cells": 8, "radius": 0.45}
