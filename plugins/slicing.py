@@ -157,7 +157,7 @@ class Slicing(mi.Mesh):
         super().__init__(props.id() or "slicing", len(walls.positions), len(walls.faces), props,
                          False, True)
         geo.fill_mesh(self, walls)
-        self.model = volume
+        self.volume = volume
         self.build_stats = {**volume.stats, "slices_auto": auto, "build_s": time.perf_counter() - start}
 
     def to_string(self):
