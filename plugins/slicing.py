@@ -8,7 +8,7 @@
         <integer name="resolution" value="64"/>     <!-- base polygons along u (plane: 1) -->
         <!-- or: <string name="filename" value="base.obj"/> (PLY/OBJ with UVs) -->
         <texture type="bricks" name="height"/>      <!-- D in [0, 1]: the α channel -->
-        <float name="scale" value="0.06"/>          <!-- maximum displacement [world units] -->
+        <float name="scale" value="0.06"/>          <!-- maximum displacement [object units, as displaced] -->
         <integer name="slices" value="25"/>          <!-- or <string name="slices" value="auto"/> -->
         <ref name="sensor" id="camera"/>            <!-- needed by slices="auto" -->
         <string name="direction" value="best"/>     <!-- a | b | c | best | screen -->
@@ -141,7 +141,7 @@ class Slicing(mi.Mesh):
         bm = geo.make_base_mesh(base_name, params, filename, resolution, to_world)
         auto = slices == "auto"
         if auto:
-            slices = geo.auto_slices(sensor, bm.bbox(scale), scale)
+            slices = geo.auto_slices(sensor, bm.bbox(scale), bm.world_scale(scale))
         volume = SlicedVolume(bm, height, scale, slices, direction, alpha, ratio_scaling, draw_base)
 
         bsdfs = nested_objects(props, mi.BSDF)

@@ -59,6 +59,8 @@ class BaseMesh:
         uvs: (V, 2) texture coordinates; faces: (F, 3) int64 vertex indices.
         su, sv: (V, 3) tangents dS/du, dS/dv [world units per unit uv].
         base: the parametric base (``None`` for a mesh file); to_world: (4, 4) matrix.
+        extrude: (V, 3) world displacement per unit of ``scale`` (the object-space normal
+            through to_world, as ``displaced`` displaces in object space); None: normals.
     """
 
     positions: np.ndarray
@@ -69,6 +71,15 @@ class BaseMesh:
     sv: np.ndarray
     base: surfaces.BaseSurface | None = None
     to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
+    extrude: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.extrude is None:
+            self.extrude = self.normals
+
+    def world_scale(self, scale: float) -> float:
+        """The maximum displacement ``scale`` (object units) in world units (median)."""
+        return scale * float(np.median(np.linalg.norm(self.extrude, axis=1)))
 
     def extent(self) -> tuple[float, float]:
         """World lengths (L_u, L_v) of the base along u and v (median tangent x uv range)."""
@@ -84,7 +95,7 @@ class BaseMesh:
 
     def bbox(self, scale: float) -> tuple[np.ndarray, np.ndarray]:
         """Bounding box of the displacement volume (min, max), (3,) each."""
-        pts = np.concatenate([self.positions, self.positions + scale * self.normals])
+        pts = np.concatenate([self.positions, self.positions + scale * self.extrude])
         return pts.min(0), pts.max(0)
 
 
@@ -133,6 +144,7 @@ def make_base_mesh(base_name: str, params: dict, filename: str | None, resolutio
         faces = _columns(t.faces).astype(np.int64)
     m = np.asarray(to_world, np.float64)
     pos = pos @ m[:3, :3].T + m[:3, 3]
+    extrude = nrm @ m[:3, :3].T
     nrm = nrm @ np.linalg.inv(m[:3, :3])
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
     if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(nrm)) and np.all(np.isfinite(uvs))):
@@ -143,7 +155,7 @@ def make_base_mesh(base_name: str, params: dict, filename: str | None, resolutio
     inward = np.einsum("ij,ij->i", fn, nrm[faces].sum(1)) < 0
     faces[inward] = faces[inward][:, ::-1]
     su, sv = vertex_tangents(pos, uvs, faces)
-    return BaseMesh(pos, nrm, uvs, faces, su, sv, base, m)
+    return BaseMesh(pos, nrm, uvs, faces, su, sv, base, m, extrude)
 
 
 @dataclass
@@ -168,11 +180,11 @@ class SliceMesh:
 
 
 def _vertex_data(bm: BaseMesh, h: float, ramp: float, wall: float, bottom: float = 0.0):
-    """Base vertices lifted to height ``h`` [world] with constant α value / wall flags."""
+    """Base vertices lifted by ``h`` x scale (object units) with constant α value / flags."""
     v = len(bm.positions)
     rw = np.zeros((v, 3))
     rw[:, 0], rw[:, 1], rw[:, 2] = ramp, wall, bottom
-    return bm.positions + h * bm.normals, bm.uvs, rw, bm.normals, bm.su, bm.sv
+    return bm.positions + h * bm.extrude, bm.uvs, rw, bm.normals, bm.su, bm.sv
 
 
 def concat(parts: list[SliceMesh]) -> SliceMesh:
@@ -238,10 +250,10 @@ def orthogonal_slices(bm: BaseMesh, scale: float, axis: int, levels: np.ndarray)
     def lerp(attr):  # (S, 2, k): attribute at the two segment ends
         return attr[ends[:, :, 0]] * (1 - weights[..., None]) + attr[ends[:, :, 1]] * weights[..., None]
 
-    p, n, uv, su, sv = (lerp(x) for x in (bm.positions, bm.normals, bm.uvs, bm.su, bm.sv))
+    p, n, uv, su, sv, e = (lerp(x) for x in (bm.positions, bm.normals, bm.uvs, bm.su, bm.sv, bm.extrude))
     s = len(p)
     # quad vertices: A_bottom, B_bottom, B_top, A_top
-    pos = np.stack([p[:, 0], p[:, 1], p[:, 1] + scale * n[:, 1], p[:, 0] + scale * n[:, 0]], 1)
+    pos = np.stack([p[:, 0], p[:, 1], p[:, 1] + scale * e[:, 1], p[:, 0] + scale * e[:, 0]], 1)
     ramp = np.tile([0.0, 0.0, 1.0, 1.0], (s, 1))
     rw = np.zeros((s, 4, 3))
     rw[..., 0] = ramp
@@ -275,7 +287,7 @@ def volume_walls(bm: BaseMesh, scale: float) -> SliceMesh:
     outward normals, so a ray enters where it meets a wall's front face."""
     lo_box, hi_box = bm.bbox(scale)
     reach = 1 + float(np.max(np.abs(np.concatenate([lo_box, hi_box]))))
-    eps = max(WALL_EPS, 4 * SPAWN_EPS * reach / scale)
+    eps = max(WALL_EPS, 4 * SPAWN_EPS * reach / bm.world_scale(scale))
     top = SliceMesh(*_vertex_data(bm, scale * (1 + eps), 1.0, 1.0), bm.faces)
     bottom = SliceMesh(*_vertex_data(bm, -scale * eps, 0.0, 1.0, 1.0), bm.faces[:, ::-1])
     parts = [top, bottom]
@@ -284,7 +296,7 @@ def volume_walls(bm: BaseMesh, scale: float) -> SliceMesh:
         a, b, c = edges[:, 0], edges[:, 1], edges[:, 2]
         lo, hi = -eps * scale, (1 + eps) * scale
         corners = [(a, lo), (b, lo), (b, hi), (a, hi)]
-        pos = np.stack([bm.positions[i] + h * bm.normals[i] for i, h in corners], 1)
+        pos = np.stack([bm.positions[i] + h * bm.extrude[i] for i, h in corners], 1)
         normal = np.cross(pos[:, 1] - pos[:, 0], pos[:, 3] - pos[:, 0])
         inward = np.einsum("ij,ij->i", normal, bm.positions[c] - bm.positions[a]) > 0
         pick = np.stack([a, b, b, a], 1)
@@ -371,7 +383,7 @@ def orthogonal_counts(bm: BaseMesh, scale: float, n: int, ratio_scaling: bool) -
     counts = []
     for length in bm.extent():
         if ratio_scaling:
-            c = math.ceil(n * length / scale - 1e-9)
+            c = math.ceil(n * length / bm.world_scale(scale) - 1e-9)
         else:
             c = n * max(1, round(length / bm.mean_edge()))
         counts.append(int(min(max(c, 1), 1 << 20)))
@@ -406,7 +418,7 @@ def auto_slices(sensor: mi.Sensor, bbox, scale: float) -> int:
     """§3.4 'auto': one surface-aligned slice per pixel of the maximum displacement's
     projected size on the scene's sensor (adjacent slices at most a pixel apart), in
     [1, MAX_SLICES]."""
-    pixels = projected_size(sensor, bbox, scale)
+    pixels = projected_size(sensor, bbox, scale)   # scale: world units here
     return int(min(max(math.ceil(pixels), 1), MAX_SLICES))
 
 

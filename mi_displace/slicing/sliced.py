@@ -74,6 +74,7 @@ class SlicedVolume:
             raise ValueError("slicing: direction 'screen' needs a parametric base (plane, sphere, "
                              "cylinder, torus): the slices are clipped with its exact coordinates")
         self.bm, self.height, self.scale, self.n = bm, height, float(scale), slices
+        self.world_scale = bm.world_scale(scale)   # the maximum displacement in world units
         self.direction, self.alpha, self.opaque_base = direction, alpha, bool(opaque_base)
         self._grad = height_function(height, 1e-3)
         walls = geo.volume_walls(bm, scale)
@@ -93,7 +94,7 @@ class SlicedVolume:
                                   4 * self.counts[fam] + 64)
         self.walls_scene = geo.SliceScene(walls, "walls")   # also the proxy's face frames
         if direction == "screen":
-            self.delta = self.scale / slices
+            self.delta = self.world_scale / slices
             self.inv_world = mi.Transform4f(mi.ScalarTransform4f(mi.ScalarMatrix4f(
                 np.linalg.inv(bm.to_world).astype(np.float32))))
             self.to_world = mi.Transform4f(mi.ScalarTransform4f(mi.ScalarMatrix4f(
@@ -191,13 +192,14 @@ class SlicedVolume:
         """Unit normal of the displaced surface S + scale D n at the fragment's uv:
         (S_u + scale D_u n) x (S_v + scale D_v n) (the n_u terms dropped), towards n."""
         _, grad = self._grad(hit.uv)
-        m = dr.cross(hit.su + self.scale * grad.x * hit.n, hit.sv + self.scale * grad.y * hit.n)
+        s = self.world_scale
+        m = dr.cross(hit.su + s * grad.x * hit.n, hit.sv + s * grad.y * hit.n)
         m = dr.select(dr.dot(m, hit.n) < 0, -m, m)
         return dr.select(dr.squared_norm(m) > 0, dr.normalize(m), hit.n)
 
     def spacing(self) -> float:
         """World distance between adjacent surface-aligned slices."""
-        return self.scale / self.n
+        return self.world_scale / self.n
 
     def occluded(self, hit: Hit, normal: mi.Vector3f, wl: mi.Vector3f, active: mi.Bool) -> mi.Bool:
         """Whether the slices block unit direction ``wl`` from the fragment (self-shadows
