@@ -15,7 +15,9 @@ All in one process (times are wall seconds; medians of 3 warm runs after a cold 
   donut's 25 surface-aligned slices per base polygon, α-test by ``discard``, 512^2, one
   frame; ``llvmpipe_64_s`` / ``llvmpipe_150_s`` at 64 / 150 slices; ``null`` with
   ``llvmpipe_reason`` when it cannot run;
-* ``slices_bytes`` (slice polygons + walls) vs ``displaced_bytes`` (the converged mesh).
+* ``slices_bytes`` (slice polygons + walls of ``best``: all three directions, §3.4 ratio
+  scaling), ``slices_bytes_direction_a`` (25 surface-aligned slices), ``slices_bytes_screen``
+  (walls only) vs ``displaced_bytes`` (the converged mesh).
 """
 from __future__ import annotations
 
@@ -103,6 +105,12 @@ def main(json: bool = False) -> int:
     stats = next(s for s in scene.shapes() if hasattr(s, "volume")).build_stats
     r["slices_used"] = stats["slices_used"]
     r["slices_bytes"] = stats["bytes"]
+    from mi_displace.slicing import geometry as geo
+
+    volume = next(s for s in scene.shapes() if hasattr(s, "volume")).volume
+    walls = volume.walls.nbytes()
+    r["slices_bytes_direction_a"] = geo.aligned_slices(volume.bm, volume.scale, 25).nbytes() + walls
+    r["slices_bytes_screen"] = walls
     r.update(donut_gl(scene))
     del scene
 
