@@ -9,6 +9,7 @@ All in one process (times are wall seconds; medians of 3 warm runs after a cold 
   ``resolution`` 2048 (converged: ``converged_flip`` = FLIP between 1024 and 2048), under
   ``raster``, render only (``true_displacement_build_s``: its tessellation + BVH);
 * ``flip``: the sliced donut against that converged donut (both raster, 512^2);
+* ``render_time_screen_warm_s`` / ``flip_screen``: the same with screen-space slices;
 * ``depth_object_time_warm_s``: the cup depth object at 400^2, 150 slices (the paper's
   high-quality case), raster, one sample per pixel;
 * ``llvmpipe_s``: the paper's algorithm as OpenGL on Mesa llvmpipe (moderngl + EGL): the
@@ -113,6 +114,9 @@ def main(json: bool = False) -> int:
     r["slices_bytes_screen"] = walls
     r.update(donut_gl(scene))
     del scene
+    scene, _ = _load(donut, mode="approximation", integrator="raster", res=RES, direction="screen")
+    r["render_time_screen_warm_s"], screen = _timed(lambda: _render(scene, raster))
+    del scene
 
     # true displacement under raster: converged tessellation
     ref = {}
@@ -127,6 +131,7 @@ def main(json: bool = False) -> int:
     r["true_displacement_resolution"] = 2048
     r["converged_flip"] = flip(ref[2048], ref[1024])[0]
     r["flip"] = flip(ref[2048], approx)[0]
+    r["flip_screen"] = flip(ref[2048], screen)[0]
     r["memory_ratio"] = r["displaced_bytes"] / r["slices_bytes"]
 
     # depth object: the cup at 400^2, 150 slices
