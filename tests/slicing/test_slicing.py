@@ -239,3 +239,18 @@ def test_screen_needs_a_parametric_base(variant, tmp_path):
     with pytest.raises(Exception, match="screen"):
         mi.load_dict({"type": "slicing", "base": "mesh", "filename": str(obj), "scale": 0.1,
                       "direction": "screen", "height": {"type": "uniform", "value": 0.5}})
+
+
+def test_colour_texture_is_extruded_with_the_slices(variant, helpers):
+    """The nested material's textures are read at the slice fragment's uv (the RGB of the
+    paper's RGBα displacement texture): a checkerboard matches true displacement."""
+    colour = {"type": "diffuse", "reflectance": {
+        "type": "checkerboard", "color0": {"type": "rgb", "value": [0.8, 0.2, 0.1]},
+        "color1": {"type": "rgb", "value": [0.1, 0.3, 0.8]},
+        "to_uv": mi.ScalarTransform4f().scale([4, 4, 1])}}
+    sensor = helpers.look([0, -2.6, 2.6], [0, 0, 0], res=48)
+    ref, _ = helpers.render({**helpers.plane("displaced"), "bsdf": colour}, sensor)
+    img, _ = helpers.render({**helpers.plane(slices=32, direction="best"), "bsdf": colour}, sensor)
+    plain, _ = helpers.render(helpers.plane(slices=32, direction="best"), sensor)
+    assert flip(ref, img)[0] < 0.6 * flip(ref, plain)[0]
+    assert flip(ref, img)[0] < 0.1
