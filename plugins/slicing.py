@@ -18,6 +18,7 @@
         <bsdf type="diffuse"> ... </bsdf>            <!-- its textures are read at the slice uv -->
     </shape>
 
+``scale`` and ``slices`` are editable through ``mi.traverse`` (the slices are rebuilt).
 The shape itself is the boundary of the displacement volume (the proxy rays enter); its
 BSDF, made here around the nested material, finds per ray the front-most slice fragment
 that passes the α-test (:mod:`mi_displace.slicing.sliced`) and is a Null pass-through
@@ -156,9 +157,30 @@ class Slicing(mi.Mesh):
         walls = volume.walls
         super().__init__(props.id() or "slicing", len(walls.positions), len(walls.faces), props,
                          False, True)
+        self.scale, self.slices = mi.Float(scale), mi.Float(slices)
         geo.fill_mesh(self, walls)
-        self.volume = volume
+        self.volume, self.bsdf_ref = volume, bsdf
+        self._settings = (direction, alpha, ratio_scaling, draw_base)
         self.build_stats = {**volume.stats, "slices_auto": auto, "build_s": time.perf_counter() - start}
+
+    def traverse(self, cb):
+        super().traverse(cb)
+        cb.put("scale", self.scale, mi.ParamFlags.NonDifferentiable)
+        cb.put("slices", self.slices, mi.ParamFlags.NonDifferentiable)
+
+    def parameters_changed(self, keys=[]):
+        if "scale" not in keys and "slices" not in keys:
+            return super().parameters_changed(keys)
+        start = time.perf_counter()
+        scale, slices = float(self.scale[0]), float(self.slices[0])
+        if slices != int(slices):
+            raise ValueError(f"slicing: 'slices' must be an integer, got {slices}")
+        old = self.volume
+        volume = SlicedVolume(old.bm, old.height, scale, int(slices), *self._settings)
+        geo.fill_mesh(self, volume.walls)   # same topology: only the walls' heights move
+        self.volume = self.bsdf_ref.model = volume
+        self.bsdf_ref._cache = None
+        self.build_stats = {**volume.stats, "slices_auto": False, "build_s": time.perf_counter() - start}
 
     def to_string(self):
         return f"Slicing[{self.build_stats}]"

@@ -254,3 +254,20 @@ def test_colour_texture_is_extruded_with_the_slices(variant, helpers):
     plain, _ = helpers.render(helpers.plane(slices=32, direction="best"), sensor)
     assert flip(ref, img)[0] < 0.6 * flip(ref, plain)[0]
     assert flip(ref, img)[0] < 0.1
+
+
+def test_traverse_edits_rebuild_the_slices(variant, helpers):
+    sensor = helpers.look([0, -2.6, 2.6], [0, 0, 0], res=32)
+    fresh, _ = helpers.render(helpers.plane(slices=24, scale=0.3, direction="best"), sensor)
+    img, scene = helpers.render(helpers.plane(slices=6, scale=0.2, direction="best"), sensor)
+    params = mi.traverse(scene)
+    params["obj.slices"] = 24
+    params["obj.scale"] = 0.3
+    params.update()
+    edited = np.array(mi.render(scene))[..., :3]
+    assert scene.shapes()[0].build_stats["slices"] == 24
+    assert np.abs(edited - fresh).max() < 1e-5
+    assert np.abs(img - fresh).max() > 0.05
+    params["obj.slices"] = 2.5
+    with pytest.raises(Exception, match="integer"):
+        params.update()
