@@ -53,6 +53,7 @@ COMMAND_MODULES = [
     "mi_displace.ddm.cli",
     "mi_displace.bake.cli",
     "mi_displace.evaluate.cli",
+    "mi_displace.slicing.cli",
 ]
 
 

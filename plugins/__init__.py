@@ -20,6 +20,8 @@ PLUGIN_MODULES = [
     "mi_displace.plugins.horizon",
     "mi_displace.plugins.relief",
     "mi_displace.plugins.restored",
+    "mi_displace.plugins.slicing",
+    "mi_displace.plugins.depth_object",
 ]
 
 _registered_for: str | None = None

@@ -170,43 +170,48 @@ class MesostructureBSDF(mi.BSDF):
     def _lit(self, state, wo_world):
         raise NotImplementedError
 
+    def _facing(self, w: mi.Vector3f) -> mi.Bool:
+        """Whether local direction ``w`` lies on the front side of the proxy surface (a
+        technique whose proxy is a volume boundary, not a surface, overrides it)."""
+        return w.z > 0
+
     def _blocked(self, si, active) -> mi.Bool:
         """Where the ray passes through (only for HAS_SILHOUETTE techniques)."""
         return active & self._prepare(si, active)[1]
 
     # -- mi.BSDF -------------------------------------------------------------------------
     def eval(self, ctx, si, wo, active=True):
-        active = mi.Bool(active) & (si.wi.z > 0)
+        active = mi.Bool(active) & self._facing(si.wi)
         state, blocked, si2 = self._prepare(si, active)
         wo_world = si.to_world(wo)
-        ok = active & ~blocked & (wo.z > 0)
+        ok = active & ~blocked & self._facing(wo)
         f = self.nested.eval(ctx, si2, si2.to_local(wo_world), ok)
         ok &= self._lit(state, wo_world)
         return dr.select(ok, mi.Spectrum(f), 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
-        active = mi.Bool(active) & (si.wi.z > 0)
+        active = mi.Bool(active) & self._facing(si.wi)
         _, blocked, si2 = self._prepare(si, active)
         ok = active & ~blocked
         return dr.select(ok, self.nested.pdf(ctx, si2, si2.to_local(si.to_world(wo)), ok), 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
-        active = mi.Bool(active) & (si.wi.z > 0)
+        active = mi.Bool(active) & self._facing(si.wi)
         state, blocked, si2 = self._prepare(si, active)
         wo_world = si.to_world(wo)
         ok = active & ~blocked
         f, pdf = self.nested.eval_pdf(ctx, si2, si2.to_local(wo_world), ok)
-        lit = ok & (wo.z > 0) & self._lit(state, wo_world)
+        lit = ok & self._facing(wo) & self._lit(state, wo_world)
         return dr.select(lit, mi.Spectrum(f), 0.0), dr.select(ok, pdf, 0.0)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         active = mi.Bool(active)
         state, blocked, si2 = self._prepare(si, active)
-        front = active & ~blocked & (si.wi.z > 0)
+        front = active & ~blocked & self._facing(si.wi)
         bs, weight = self.nested.sample(ctx, si2, sample1, sample2, front)
         wo_world = si2.to_world(bs.wo)
         wo = si.to_local(wo_world)
-        keep = front & (wo.z > 0) & self._lit(state, wo_world)
+        keep = front & self._facing(wo) & self._lit(state, wo_world)
         weight = dr.select(keep, mi.Spectrum(weight), 0.0)
         passes = active & blocked  # silhouette: the ray goes on (Null component)
         bs.wo = dr.select(passes, -si.wi, wo)

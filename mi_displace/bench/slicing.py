@@ -1,0 +1,152 @@
+"""``mi-displace bench slicing [--json]``: displacement by slicing and depth objects.
+
+All in one process (times are wall seconds; medians of 3 warm runs after a cold one):
+
+* ``render_time_warm_s``: the bricked donut (scenes/slicing_donut.xml) at 512^2, 25 slices,
+  best direction, under ``raster`` with one sample per pixel (as a GPU draws it);
+  ``build_time_warm_s``: loading it (slice polygons + their BVHs);
+* ``true_displacement_time_warm_s``: the same donut tessellated by ``displaced`` at
+  ``resolution`` 2048 (converged: ``converged_flip`` = FLIP between 1024 and 2048), under
+  ``raster``, render only (``true_displacement_build_s``: its tessellation + BVH);
+* ``flip``: the sliced donut against that converged donut (both raster, 512^2);
+* ``render_time_screen_warm_s`` / ``flip_screen``: the same with screen-space slices;
+* ``depth_object_time_warm_s``: the cup depth object at 400^2, 150 slices (the paper's
+  high-quality case), raster, one sample per pixel;
+* ``llvmpipe_s``: the paper's algorithm as OpenGL on Mesa llvmpipe (moderngl + EGL): the
+  donut's 25 surface-aligned slices per base polygon, α-test by ``discard``, 512^2, one
+  frame; ``llvmpipe_64_s`` / ``llvmpipe_150_s`` at 64 / 150 slices; ``null`` with
+  ``llvmpipe_reason`` when it cannot run;
+* ``slices_bytes`` (slice polygons + walls of ``best``: all three directions, §3.4 ratio
+  scaling), ``slices_bytes_direction_a`` (25 surface-aligned slices), ``slices_bytes_screen``
+  (walls only) vs ``displaced_bytes`` (the converged mesh).
+"""
+from __future__ import annotations
+
+import json as _json
+import statistics
+import time
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+RES = 512
+
+
+def _timed(fn, repeats=3):
+    fn()
+    times = []
+    for _ in range(repeats):
+        dr.sync_thread()
+        start = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times), out
+
+
+def _render(scene, integrator):
+    return np.asarray(mi.render(scene, integrator=integrator), np.float32)[..., :3]
+
+
+def _load(path, **params):
+    dr.sync_thread()
+    start = time.perf_counter()
+    scene = mi.load_file(str(path), **{k: str(v) for k, v in params.items()})
+    dr.sync_thread()
+    return scene, time.perf_counter() - start
+
+
+def donut_gl(scene, slices_list=(25, 64, 150)) -> dict:
+    """llvmpipe frame times of the donut's surface-aligned slices (see module doc)."""
+    from mi_displace.slicing import geometry as geo
+    from mi_displace.slicing import opengl
+
+    reason = opengl.setup()
+    if reason is not None:
+        return {"llvmpipe_s": None, "llvmpipe_reason": reason}
+    volume = next(s for s in scene.shapes() if hasattr(s, "volume")).volume
+    R = 1024
+    g = (np.arange(R) + 0.5) / R
+    u, v = np.meshgrid(g, g)
+    D = np.asarray(volume.D(mi.Point2f(mi.Float(u.ravel()), mi.Float(v.ravel()))), np.float32).reshape(R, R)
+    mvp = opengl.look_at_mvp([0, -4.2, 2.4], [0, 0, -0.1], [0, 0, 1], 30.0, 1.0)
+    out = {}
+    for n in slices_list:
+        gl = opengl.GLSlices(geo.aligned_slices(volume.bm, volume.scale, n), D, mvp, RES, RES,
+                             light=(0.8, -0.45, 0.4))
+        t, _ = _timed(gl.frame, 5)
+        covered = float((np.abs(gl.image() - np.array([0.12, 0.13, 0.15])).max(-1) > 0.02).mean())
+        gl.release()
+        out["llvmpipe_s" if n == 25 else f"llvmpipe_{n}_s"] = t
+        out.setdefault("llvmpipe_coverage", covered)
+    import moderngl
+
+    ctx = moderngl.create_standalone_context(backend="egl")
+    out["llvmpipe_renderer"] = ctx.info["GL_RENDERER"]
+    ctx.release()
+    return out
+
+
+def main(json: bool = False) -> int:
+    import mi_displace
+    from mi_displace.evaluate.metrics import flip
+
+    mi_displace.init()
+    raster = mi.load_dict({"type": "raster", "aa": 1})
+    donut = SCENES / "slicing_donut.xml"
+    r: dict = {"variant": mi.variant(), "resolution": RES, "slices": 25, "direction": "best"}
+
+    # the sliced donut: build (warm) and render (warm)
+    _load(donut, mode="approximation", integrator="raster", res=RES)
+    scene, build = _load(donut, mode="approximation", integrator="raster", res=RES)
+    r["build_time_warm_s"] = build
+    r["render_time_warm_s"], approx = _timed(lambda: _render(scene, raster))
+    stats = next(s for s in scene.shapes() if hasattr(s, "volume")).build_stats
+    r["slices_used"] = stats["slices_used"]
+    r["slices_bytes"] = stats["bytes"]
+    from mi_displace.slicing import geometry as geo
+
+    volume = next(s for s in scene.shapes() if hasattr(s, "volume")).volume
+    walls = volume.walls.nbytes()
+    r["slices_bytes_direction_a"] = geo.aligned_slices(volume.bm, volume.scale, 25).nbytes() + walls
+    r["slices_bytes_screen"] = walls
+    r.update(donut_gl(scene))
+    del scene
+    scene, _ = _load(donut, mode="approximation", integrator="raster", res=RES, direction="screen")
+    r["render_time_screen_warm_s"], screen = _timed(lambda: _render(scene, raster))
+    del scene
+
+    # true displacement under raster: converged tessellation
+    ref = {}
+    for res in (1024, 2048):
+        scene, build = _load(donut, mode="reference", integrator="raster", res=RES, resolution=res)
+        t, ref[res] = _timed(lambda: _render(scene, raster))
+        if res == 2048:
+            r["true_displacement_time_warm_s"], r["true_displacement_build_s"] = t, build
+            r["displaced_bytes"] = scene.shapes()[0].build_stats["bytes"]
+            r["displaced_faces"] = scene.shapes()[0].build_stats["faces"]
+        del scene
+    r["true_displacement_resolution"] = 2048
+    r["converged_flip"] = flip(ref[2048], ref[1024])[0]
+    r["flip"] = flip(ref[2048], approx)[0]
+    r["flip_screen"] = flip(ref[2048], screen)[0]
+    r["memory_ratio"] = r["displaced_bytes"] / r["slices_bytes"]
+
+    # depth object: the cup at 400^2, 150 slices
+    cup = SCENES / "slicing_cup_depth.xml"
+    _load(cup, mode="approximation", integrator="raster", res=400, slices=150)
+    scene, build = _load(cup, mode="approximation", integrator="raster", res=400, slices=150)
+    r["depth_object_build_s"] = build
+    r["depth_object_time_warm_s"], _ = _timed(lambda: _render(scene, raster))
+    del scene
+    if r.get("llvmpipe_s"):
+        r["speedup_vs_llvmpipe"] = r["llvmpipe_s"] / r["render_time_warm_s"]
+    r["speedup_vs_true_displacement"] = r["true_displacement_time_warm_s"] / r["render_time_warm_s"]
+    if json:
+        print(_json.dumps(r, indent=2))
+    else:
+        for k, v in r.items():
+            print(f"{k:32s} {v}")
+    return 0

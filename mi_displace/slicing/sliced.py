@@ -1,0 +1,211 @@
+"""A displaced surface drawn as slices through its displacement volume (§3).
+
+:class:`SlicedVolume` owns the slice polygons of each slicing direction as private scenes
+(:class:`mi_displace.slicing.geometry.SliceScene`) and answers, per ray, where the front-
+most slice fragment that passes the α-test lies (:meth:`SlicedVolume.find`) and whether the
+slices occlude a light from a point (:meth:`SlicedVolume.occluded`).
+
+Directions: ``a`` (surface-aligned, §3.1), ``b`` / ``c`` (orthogonal along u / v, §3.2),
+``best`` (per ray the one of a, b, c whose slices face the ray most, §3.2: "the slicing
+direction that is most perpendicular to the viewer"), ``screen`` (§3.3: planes
+perpendicular to the ray, ``p . d = k delta`` anchored at the world origin, clipped to the
+displacement volume of the exact parametric base).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mi_displace.core.texture_height import height_function
+from mi_displace.slicing import geometry as geo
+from mi_displace.slicing.trace import ALPHA_TESTS, alpha_test, first_passing_plane, first_passing_slice
+
+DIRECTIONS = ("a", "b", "c", "best", "screen")
+#: Offset of the self-shadow rays [slice spacings].
+SHADOW_BIAS = 2.0
+FAMILIES = {"a": ("a",), "b": ("b",), "c": ("c",), "best": ("a", "b", "c"), "screen": ()}
+
+
+@dataclass
+class Hit:
+    """The passing fragment of each ray (Dr.Jit, one entry per ray).
+
+    Attributes: found; p (world point); uv; n, su, sv (base normal and tangents there);
+    offset_n (the geometric normal of the slice polygon, for spawning rays off it).
+    """
+
+    found: mi.Bool
+    p: mi.Point3f
+    uv: mi.Point2f
+    n: mi.Vector3f
+    su: mi.Vector3f
+    sv: mi.Vector3f
+
+
+class SlicedVolume:
+    """The slices of one displaced surface.
+
+    Args:
+        bm: base polygons (world space). height: texture whose ``eval_1`` in [0, 1] is the
+            α channel D (values outside are clipped). scale: maximum displacement [world].
+        slices: N, surface-aligned slices (the orthogonal counts follow, see
+            :func:`mi_displace.slicing.geometry.orthogonal_counts`).
+        direction: one of :data:`DIRECTIONS`; alpha: one of ``basic`` / ``ramp``.
+        ratio_scaling: §3.4 orthogonal slice counts; opaque_base: the base polygons are
+            drawn too (opaque where every slice fails, e.g. under zero heights).
+    """
+
+    def __init__(self, bm: geo.BaseMesh, height: mi.Texture, scale: float, slices: int,
+                 direction: str, alpha: str, ratio_scaling: bool = True, opaque_base: bool = False):
+        if direction not in DIRECTIONS:
+            raise ValueError(f"slicing: 'direction' must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
+        if alpha not in ALPHA_TESTS:
+            raise ValueError(f"slicing: 'alpha' must be one of {', '.join(ALPHA_TESTS)}, got {alpha!r}")
+        if not (isinstance(slices, int) and 1 <= slices <= geo.MAX_SLICES):
+            raise ValueError(f"slicing: 'slices' must be an integer in [1, {geo.MAX_SLICES}] or "
+                             f"'auto', got {slices!r}")
+        if not (math.isfinite(scale) and scale > 0):
+            raise ValueError(f"slicing: 'scale' must be a positive number, got {scale!r}")
+        if direction == "screen" and bm.base is None:
+            raise ValueError("slicing: direction 'screen' needs a parametric base (plane, sphere, "
+                             "cylinder, torus): the slices are clipped with its exact coordinates")
+        self.bm, self.height, self.scale, self.n = bm, height, float(scale), slices
+        self.world_scale = bm.world_scale(scale)   # the maximum displacement in world units
+        self.direction, self.alpha, self.opaque_base = direction, alpha, bool(opaque_base)
+        self._grad = height_function(height, 1e-3)
+        walls = geo.volume_walls(bm, scale)
+        self.walls = walls
+        cb, cc = geo.orthogonal_counts(bm, scale, slices, ratio_scaling)
+        self.counts = {"a": slices, "b": cb, "c": cc}
+        self.families, tris, nbytes = {}, 0, walls.nbytes()
+        for fam in FAMILIES[direction]:
+            if fam == "a":
+                sm = geo.aligned_slices(bm, scale, slices)
+            else:
+                axis = 0 if fam == "b" else 1
+                sm = geo.orthogonal_slices(bm, scale, axis, geo.orthogonal_levels(bm, axis, self.counts[fam]))
+            tris += sm.triangles
+            nbytes += sm.nbytes()
+            self.families[fam] = (geo.SliceScene(geo.concat([sm, walls]), f"slices_{fam}"),
+                                  4 * self.counts[fam] + 64)
+        self.walls_scene = geo.SliceScene(walls, "walls")   # also the proxy's face frames
+        if direction == "screen":
+            self.delta = self.world_scale / slices
+            self.inv_world = mi.Transform4f(mi.ScalarTransform4f(mi.ScalarMatrix4f(
+                np.linalg.inv(bm.to_world).astype(np.float32))))
+            self.to_world = mi.Transform4f(mi.ScalarTransform4f(mi.ScalarMatrix4f(
+                bm.to_world.astype(np.float32))))
+        self.stats = {"slices": slices, "direction": direction, "alpha": alpha,
+                      "slices_b": cb, "slices_c": cc, "ratio_scaling": bool(ratio_scaling),
+                      "opaque_base": self.opaque_base,
+                      "slice_triangles": int(tris), "wall_triangles": int(walls.triangles),
+                      "bytes": int(nbytes), "base_faces": int(len(bm.faces))}
+        if direction != "screen":
+            self.stats["slices_used"] = {f: self.counts[f] for f in FAMILIES[direction]}
+
+    # -- the α channel -------------------------------------------------------------------
+    def D(self, uv: mi.Point2f) -> mi.Float:
+        """Displacement in [0, 1] at ``uv`` (the α channel of the displacement texture)."""
+        si = dr.zeros(mi.SurfaceInteraction3f, dr.width(uv))
+        si.uv = uv
+        return dr.clip(self.height.eval_1(si), 0.0, 1.0)
+
+    def _test(self, uv, h_alpha):
+        return alpha_test(self.alpha, self.D(uv), h_alpha)
+
+    # -- families ------------------------------------------------------------------------
+    def choose(self, d: mi.Vector3f, n: mi.Vector3f, su: mi.Vector3f, sv: mi.Vector3f) -> mi.UInt32:
+        """Per ray, index into ``FAMILIES[direction]`` of the family to use: for ``best`` the
+        one whose slice normal (n, grad u, grad v) is most parallel to ``d`` (§3.2)."""
+        fams = FAMILIES[self.direction]
+        if len(fams) == 1:
+            return dr.zeros(mi.UInt32, dr.width(d))
+        e, f, g = dr.dot(su, su), dr.dot(su, sv), dr.dot(sv, sv)
+        grad_u, grad_v = g * su - f * sv, e * sv - f * su   # parallel to grad u, grad v
+        cos = [dr.abs(dr.dot(d, dr.normalize(x))) for x in (n, grad_u, grad_v)]
+        best = dr.select(cos[1] > cos[0], 1, 0)
+        best_cos = dr.maximum(cos[0], cos[1])
+        return mi.UInt32(dr.select(cos[2] > best_cos, 2, best))
+
+    def find(self, origin: mi.Point3f, d: mi.Vector3f, choice: mi.UInt32, active: mi.Bool):
+        """Front-most passing fragment along ``origin + t d`` (t >= 0) inside the first
+        stretch of displacement volume the ray meets (up to the wall it leaves through).
+
+        Returns:
+            :class:`Hit` (``found`` False where every slice failed the test).
+        """
+        n = dr.width(origin)
+        active = mi.Bool(active)
+        if self.direction == "screen":
+            return self._find_screen(origin, d, active)
+        found = dr.zeros(mi.Bool, n)
+        hit = Hit(found, mi.Point3f(origin), dr.zeros(mi.Point2f, n), dr.zeros(mi.Vector3f, n),
+                  dr.zeros(mi.Vector3f, n), dr.zeros(mi.Vector3f, n))
+        for index, fam in enumerate(FAMILIES[self.direction]):
+            slices, max_iter = self.families[fam]
+            mine = active & (choice == index)
+            ok, t, prim, bary, *_ = first_passing_slice(slices, origin, d, self._test, mine,
+                                                        max_iter, self.opaque_base)
+            idx = slices.corners(prim, ok)
+            uv = mi.Point2f(*slices.lerp(slices.uv, 2, idx, bary, ok))
+            bn, su, sv = slices.frame(prim, bary, ok)
+            hit.found |= ok
+            hit.p = dr.select(ok, origin + t * d, hit.p)
+            hit.uv = dr.select(ok, uv, hit.uv)
+            hit.n, hit.su, hit.sv = (dr.select(ok, new, old) for new, old in
+                                     ((bn, hit.n), (su, hit.su), (sv, hit.sv)))
+        hit.n = dr.normalize(hit.n)
+        return hit
+
+    def _find_screen(self, origin, d, active):
+        """§3.3: planes p . d = k delta clipped to the volume (the base's exact coordinates)."""
+        never = lambda uv, h: dr.zeros(mi.Bool, dr.width(h))
+        *_, t_in, t_out, bottom = first_passing_slice(self.walls_scene, origin, d, never, active, 64)
+        t_out = dr.select(dr.isinf(t_out), t_in, t_out)
+        base = self.bm.base
+
+        def coords(p):
+            u, v, dist, inside = geo.base_coordinates(base, self.inv_world @ p)
+            return mi.Point2f(u, v), dist / self.scale, inside
+
+        def test(p):
+            uv, h, inside = coords(p)
+            return inside & (h >= 0) & (h <= 1) & alpha_test(self.alpha, self.D(uv), h)
+
+        steps = int(2 * self.n * 200) + 64   # grazing rays: path length / delta
+        found, t = first_passing_plane(origin, d, d, 0.0, self.delta, t_in, t_out, test, active, steps)
+        if self.opaque_base:
+            t = dr.select(found, t, t_out)
+            found |= active & bottom
+        p = origin + t * d
+        uv, _, _ = coords(p)
+        s = base.sample(uv.x, uv.y)
+        n = dr.normalize(self.to_world @ mi.Normal3f(s.n))
+        return Hit(found, p, uv, mi.Vector3f(n), self.to_world @ s.dp_du, self.to_world @ s.dp_dv)
+
+    # -- shading -------------------------------------------------------------------------
+    def normal(self, hit: Hit) -> mi.Vector3f:
+        """Unit normal of the displaced surface S + scale D n at the fragment's uv:
+        (S_u + scale D_u n) x (S_v + scale D_v n) (the n_u terms dropped), towards n."""
+        _, grad = self._grad(hit.uv)
+        s = self.world_scale
+        m = dr.cross(hit.su + s * grad.x * hit.n, hit.sv + s * grad.y * hit.n)
+        m = dr.select(dr.dot(m, hit.n) < 0, -m, m)
+        return dr.select(dr.squared_norm(m) > 0, dr.normalize(m), hit.n)
+
+    def spacing(self) -> float:
+        """World distance between adjacent surface-aligned slices."""
+        return self.world_scale / self.n
+
+    def occluded(self, hit: Hit, normal: mi.Vector3f, wl: mi.Vector3f, active: mi.Bool) -> mi.Bool:
+        """Whether the slices block unit direction ``wl`` from the fragment (self-shadows
+        drawn by the slices themselves).  The ray starts :data:`SHADOW_BIAS` slice spacings
+        off the surface along ``normal``: a fragment lies up to one spacing inside the
+        solid, and the slices' own staircase would otherwise shadow it (acne)."""
+        origin = hit.p + normal * (SHADOW_BIAS * self.spacing())
+        choice = self.choose(wl, hit.n, hit.su, hit.sv)
+        return self.find(origin, wl, choice, active).found

@@ -1,0 +1,143 @@
+"""Front-to-back slice loops: the first slice whose fragment passes the α-test wins.
+
+A GPU draws every slice polygon and its depth test keeps the front-most fragment that the
+α-test lets through.  Per ray that is a loop over the slices in the order the ray meets
+them, stopping at the first passing one — never a march with its own step: the slices sit
+at fixed places, so their artefacts (see-through at grazing angles, stair steps) are kept.
+
+* :func:`first_passing_slice` — slice *polygons* (surface-aligned or orthogonal, any base):
+  each iteration asks the slices' own BVH for the next polygon along the ray (the order a
+  depth test sorts fragments in), until a fragment passes or the ray leaves the
+  displacement volume through a wall.
+* :func:`first_passing_plane` — parallel *planes* ``p . m = c + k delta`` (screen-space
+  slices §3.3, the cube slices of depth objects §4.1): plane k is met at
+  ``t_k = (c + k delta - o . m) / (d . m)`` in closed form, k stepping towards the ray.
+
+Both are Dr.Jit symbolic loops; every argument is a Dr.Jit array of one entry per ray.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import drjit as dr
+import mitsuba as mi
+
+#: α-test of §3.1 (``basic``: D >= h_α, zero heights drawn) and §3.2 (``ramp``: D - h_α > 0,
+#: zero heights masked out).
+ALPHA_TESTS = ("basic", "ramp")
+#: Offset [x (1 + max |p|) world units] that moves a walk off the polygon it just met.
+#: Mitsuba's spawn_ray uses ~9e-5, which would skip slices closer than that.
+SPAWN_EPS = 1e-5
+
+
+def step_past(p: mi.Point3f, n: mi.Vector3f, d: mi.Vector3f) -> mi.Float:
+    """Distance along unit ``d`` that leaves the polygon through ``p`` (unit normal ``n``)
+    behind by :data:`SPAWN_EPS` x (1 + max |p|) along its normal.  Walks stay on the ray's
+    line (a normal offset per slice would drift the ray sideways over thousands of slices)."""
+    offset = SPAWN_EPS * (1 + dr.max(dr.abs(p)))
+    return offset / dr.maximum(dr.abs(dr.dot(d, n)), 1e-3)
+
+
+def alpha_test(kind: str, D: mi.Float, h_alpha: mi.Float) -> mi.Bool:
+    """The fragment test: ``D`` displacement (α channel, [0, 1]), ``h_alpha`` the slice's."""
+    if kind == "basic":
+        return D >= h_alpha
+    return D - h_alpha > 0
+
+
+def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
+                        test: Callable[[mi.Point2f, mi.Float], mi.Bool],
+                        active: mi.Bool, max_iter: int, opaque_base: bool = False):
+    """Walk the slice polygons of ``slices`` (a :class:`mi_displace.slicing.geometry.SliceScene`)
+    from ``origin`` along unit ``d``.
+
+    Walls (the volume boundary) are passed when entered; the walk stops at the first
+    passing slice fragment, at the first wall the ray leaves through, at a miss, or after
+    ``max_iter`` polygons.  With ``opaque_base`` the bottom wall (the base surface) is a
+    passing fragment when the ray leaves through it (the base polygons drawn as well).
+
+    Args:
+        test: ``test(uv, h_alpha) -> Bool``, the α-test of a slice fragment.
+
+    Returns:
+        ``(found, t, prim, bary, t_enter, t_exit, bottom)``: distance, face and barycentrics
+        of the fragment found; ``t_enter`` the distance to the first wall entered (0 if the
+        walk starts inside), ``t_exit`` to the wall left (inf on a miss), both from
+        ``origin``; ``bottom``: that wall is the bottom.
+    """
+    scene = slices.scene
+    n = dr.width(origin)
+    inf, zero = dr.full(mi.Float, dr.inf, n), dr.zeros(mi.Float, n)
+
+    def body(i, t_acc, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom):
+        ray = mi.Ray3f(origin + t_acc * d, d)
+        pi = scene.ray_intersect_preliminary(ray, going)
+        valid = going & pi.is_valid()
+        face = pi.prim_index
+        flags = dr.gather(mi.UInt32, slices.flags, face, valid)
+        fn = slices.face_normal(face, valid)
+        wall = (flags & 1) != 0
+        leaving = valid & wall & (dr.dot(ray.d, fn) > 0)
+        entering = valid & wall & ~leaving
+        t = t_acc + pi.t
+        p = origin + t * d
+        t_enter = dr.select(entering & (t_enter == dr.inf) & (t_exit == dr.inf), t, t_enter)
+        t_exit = dr.select(leaving, t, t_exit)
+        bottom = leaving & ((flags & 2) != 0)
+        idx = slices.corners(face, valid)
+        bary = (pi.prim_uv.x, pi.prim_uv.y)
+        uv = mi.Point2f(*slices.lerp(slices.uv, 2, idx, bary, valid))
+        ramp = slices.lerp(slices.ramp, 1, idx, bary, valid)[0]
+        passes = valid & ~wall & test(uv, ramp)
+        if opaque_base:
+            passes |= bottom
+        t_hit = dr.select(passes, t, t_hit)
+        prim = dr.select(passes, face, prim)
+        b0, b1 = dr.select(passes, bary[0], b0), dr.select(passes, bary[1], b1)
+        found |= passes
+        going = valid & ~passes & ~leaving & (i + 1 < max_iter)
+        t_acc = dr.select(going, t + step_past(p, fn, d), t_acc)
+        return i + 1, t_acc, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom
+
+    state = (mi.UInt32(0), mi.Float(zero), dr.zeros(mi.Bool, n), mi.Bool(active),
+             mi.Float(zero), dr.zeros(mi.UInt32, n), mi.Float(zero), mi.Float(zero),
+             mi.Float(inf), mi.Float(inf), dr.zeros(mi.Bool, n))
+    _, _, found, _, t_hit, prim, b0, b1, t_enter, t_exit, bottom = dr.while_loop(
+        state=state, cond=lambda i, ray, found, going, *_: going, body=body,
+        labels=("i", "t_acc", "found", "going", "t_hit", "prim", "b0", "b1", "t_enter",
+                "t_exit", "bottom"),
+        label="slicing_polygons")
+    t_enter = dr.select(t_enter == dr.inf, 0.0, dr.minimum(t_enter, t_exit))
+    return found, t_hit, prim, (b0, b1), t_enter, t_exit, bottom
+
+
+def first_passing_plane(o: mi.Point3f, d: mi.Vector3f, m: mi.Vector3f, c, delta: float,
+                        t_in: mi.Float, t_out: mi.Float, test: Callable[[mi.Point3f], mi.Bool],
+                        active: mi.Bool, max_iter: int):
+    """First of the planes ``p . m = c + k delta`` (k integer) met by ``o + t d`` in
+    [t_in, t_out] where ``test(p)`` holds, front to back.
+
+    Returns:
+        ``(found, t)``: t of the passing plane point (unspecified where not found).
+    """
+    dm, om = dr.dot(d, m), dr.dot(o, m)
+    ok = mi.Bool(active) & (dr.abs(dm) > 1e-12) & (t_out >= t_in)
+    dm_safe = dr.select(dr.abs(dm) > 1e-12, dm, 1.0)
+    f = (om + t_in * dm - c) / delta
+    k0 = dr.select(dm > 0, dr.ceil(f), dr.floor(f))
+    step = dr.select(dm > 0, 1.0, -1.0)
+    n = dr.width(ok)
+
+    def body(j, found, t_hit, going):
+        t = (c + (k0 + step * mi.Float(j)) * delta - om) / dm_safe
+        going &= t <= t_out
+        passes = going & test(o + t * d)
+        t_hit = dr.select(passes, t, t_hit)
+        found |= passes
+        return j + 1, found, t_hit, going & ~passes & (j + 1 < max_iter)
+
+    _, found, t_hit, _ = dr.while_loop(
+        state=(mi.UInt32(0), dr.zeros(mi.Bool, n), dr.zeros(mi.Float, n), ok),
+        cond=lambda j, found, t_hit, going: going, body=body,
+        labels=("j", "found", "t_hit", "going"), label="slicing_planes")
+    return found, t_hit

@@ -1,0 +1,190 @@
+"""``<shape type="slicing">``: displacement mapping by slicing the displacement volume (§3).
+
+.. code-block:: xml
+
+    <shape type="slicing">
+        <string name="base" value="torus"/>        <!-- plane | sphere | cylinder | torus | mesh -->
+        <float name="major_radius" value="1"/>  <float name="minor_radius" value="0.4"/>
+        <integer name="resolution" value="64"/>     <!-- base polygons along u (plane: 1) -->
+        <!-- or: <string name="filename" value="base.obj"/> (PLY/OBJ with UVs) -->
+        <texture type="bricks" name="height"/>      <!-- D in [0, 1]: the α channel -->
+        <float name="scale" value="0.06"/>          <!-- maximum displacement [object units, as displaced] -->
+        <integer name="slices" value="25"/>          <!-- or <string name="slices" value="auto"/> -->
+        <ref name="sensor" id="camera"/>            <!-- needed by slices="auto" -->
+        <string name="direction" value="best"/>     <!-- a | b | c | best | screen -->
+        <string name="alpha" value="ramp"/>         <!-- basic (default for a) | ramp -->
+        <boolean name="ratio_scaling" value="true"/> <!-- §3.4 orthogonal count scaling -->
+        <boolean name="draw_base" value="false"/>   <!-- also draw the base polygons (opaque) -->
+        <bsdf type="diffuse"> ... </bsdf>            <!-- its textures are read at the slice uv -->
+    </shape>
+
+``scale`` and ``slices`` are editable through ``mi.traverse`` (the slices are rebuilt).
+The shape itself is the boundary of the displacement volume (the proxy rays enter); its
+BSDF, made here around the nested material, finds per ray the front-most slice fragment
+that passes the α-test (:mod:`mi_displace.slicing.sliced`) and is a Null pass-through
+where none does, so it works under ``raster`` and ``path`` alike.  Self-shadows come from
+the slices themselves (a second slice walk towards the light).  ``build_stats`` reports
+the slice counts (what ``auto`` chose), triangles and bytes.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mi_displace.core.texture_height import check_texture_finite
+from mi_displace.plugins.displaced import BASE_PARAMS
+from mi_displace.plugins.vdm import MesostructureBSDF, nested_objects
+from mi_displace.slicing import geometry as geo
+from mi_displace.slicing.sliced import DIRECTIONS, SlicedVolume
+from mi_displace.vdm.frame import shading_interaction
+
+
+class SlicingBSDF(MesostructureBSDF):
+    """The α-tested slices of a :class:`SlicedVolume` seen through the volume's walls.
+
+    Subclasses implement ``_walk(si, active)`` (the ``_prepare`` of MesostructureBSDF,
+    computed once per interaction) and ``_lit``."""
+
+    PLUGIN = "slicing"
+    HAS_SILHOUETTE = True
+
+    def __init__(self, props: mi.Properties, model):
+        super().__init__(props)
+        self.model = model   # a SlicedVolume (or a DepthObject in the subclass)
+        self._cache = None
+
+    def _facing(self, w):
+        # the proxy is the volume's boundary: the fragment's own normal decides (nested BSDF)
+        return dr.full(mi.Bool, True, dr.width(w))
+
+    def _prepare(self, si, active):
+        # Mitsuba asks eval, eval_null_transmission and eval_diffuse_reflectance of the same
+        # interaction in one kernel: walk the slices once per interaction (all valid lanes,
+        # so a later call's mask is always covered); the cache keeps si's variables alive,
+        # so their JIT indices cannot be reused by another interaction.
+        key = (si.t.index, si.p.x.index, si.wi.x.index)
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[2]
+        result = self._walk(si, si.is_valid())
+        self._cache = (key, (si.t, si.p, si.wi), result)
+        return result
+
+    def _walk(self, si, active):
+        active = mi.Bool(active)
+        wi = si.to_world(si.wi)
+        origin, d = si.p + wi * si.t, -wi   # the ray's own origin: a camera inside works too
+        third = dr.full(mi.Float, 1 / 3, dr.width(si.t))   # the proxy face's centre (faces
+        bn, su, sv = self.model.walls_scene.frame(si.prim_index, (third, third), active)  # = walls)
+        choice = self.model.choose(d, dr.normalize(bn), su, sv)
+        hit = self.model.find(origin, d, choice, active)
+        normal = self.model.normal(hit)
+        si2 = shading_interaction(si, hit.uv, normal, hit.su)
+        si2.p = hit.p
+        return (hit, normal), active & ~hit.found, si2
+
+    def _lit(self, state, wo_world):
+        hit, normal = state
+        return ~self.model.occluded(hit, normal, wo_world, hit.found & (dr.dot(normal, wo_world) > 0))
+
+    def to_string(self):
+        return f"{type(self).__name__}[{self.model.stats}]"
+
+
+def _slice_count(props: mi.Properties):
+    """``slices``: a positive integer or ``"auto"``."""
+    value = props.get("slices", 25)
+    if isinstance(value, str):
+        if value.strip().lower() == "auto":
+            return "auto"
+        try:
+            value = float(value)
+        except ValueError:
+            raise ValueError(f"slicing: 'slices' must be an integer or 'auto', got {value!r}") from None
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value == int(value)
+            and 1 <= value <= geo.MAX_SLICES):
+        raise ValueError(f"slicing: 'slices' must be an integer in [1, {geo.MAX_SLICES}] or "
+                         f"'auto', got {value!r}")
+    return int(value)
+
+
+class Slicing(mi.Mesh):
+    """Boundary of the displacement volume with the slicing BSDF (module docstring)."""
+
+    def __init__(self, props: mi.Properties):
+        start = time.perf_counter()
+        base_name = props.get("base", "mesh" if "filename" in props else "plane")
+        height = props.get("height", None)
+        if not isinstance(height, mi.Texture):
+            raise ValueError("slicing: 'height' must be a nested texture (D in [0, 1])")
+        check_texture_finite(height)
+        scale = float(props.get("scale", 0.1))
+        if not (math.isfinite(scale) and scale > 0):
+            raise ValueError(f"slicing: 'scale' must be a positive number, got {scale}")
+        slices = _slice_count(props)
+        direction = str(props.get("direction", "best"))
+        if direction not in DIRECTIONS:
+            raise ValueError(f"slicing: 'direction' must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
+        alpha = str(props.get("alpha", "basic" if direction == "a" else "ramp"))
+        ratio_scaling = bool(props.get("ratio_scaling", True))
+        draw_base = bool(props.get("draw_base", False))
+        sensor = props.get("sensor", None)
+        if slices == "auto" and not isinstance(sensor, mi.Sensor):
+            raise ValueError("slicing: slices='auto' needs the scene's camera: "
+                             "<ref name=\"sensor\" id=\"...\"/> (declared before this shape)")
+        resolution = props.get("resolution", 1 if base_name == "plane" else 64)
+        params = {k: float(props.get(k)) for k in BASE_PARAMS.get(base_name, ()) if k in props}
+        to_world = np.array(props.get("to_world", mi.ScalarTransform4f()).matrix, np.float64)
+        filename = props.get("filename", None) if base_name == "mesh" else None
+        bm = geo.make_base_mesh(base_name, params, filename, resolution, to_world)
+        auto = slices == "auto"
+        if auto:
+            slices = geo.auto_slices(sensor, bm.bbox(scale), bm.world_scale(scale))
+        volume = SlicedVolume(bm, height, scale, slices, direction, alpha, ratio_scaling, draw_base)
+
+        bsdfs = nested_objects(props, mi.BSDF)
+        if len(bsdfs) > 1:
+            raise ValueError(f"slicing: expected at most one nested BSDF, got {len(bsdfs)}")
+        material = bsdfs[0][1] if bsdfs else mi.load_dict({"type": "diffuse"})
+        inner = mi.Properties("slicing")
+        inner["height"] = height
+        inner["material"] = material
+        bsdf = SlicingBSDF(inner, volume)
+        props[bsdfs[0][0] if bsdfs else "bsdf"] = bsdf
+        walls = volume.walls
+        super().__init__(props.id() or "slicing", len(walls.positions), len(walls.faces), props,
+                         False, True)
+        self.scale, self.slices = mi.Float(scale), mi.Float(slices)
+        geo.fill_mesh(self, walls)
+        self.volume, self.bsdf_ref = volume, bsdf
+        self._settings = (direction, alpha, ratio_scaling, draw_base)
+        self.build_stats = {**volume.stats, "slices_auto": auto, "build_s": time.perf_counter() - start}
+
+    def traverse(self, cb):
+        super().traverse(cb)
+        cb.put("scale", self.scale, mi.ParamFlags.NonDifferentiable)
+        cb.put("slices", self.slices, mi.ParamFlags.NonDifferentiable)
+
+    def parameters_changed(self, keys=[]):
+        if "scale" not in keys and "slices" not in keys:
+            return super().parameters_changed(keys)
+        start = time.perf_counter()
+        scale, slices = float(self.scale[0]), float(self.slices[0])
+        if slices != int(slices):
+            raise ValueError(f"slicing: 'slices' must be an integer, got {slices}")
+        old = self.volume
+        volume = SlicedVolume(old.bm, old.height, scale, int(slices), *self._settings)
+        geo.fill_mesh(self, volume.walls)   # same topology: only the walls' heights move
+        self.volume = self.bsdf_ref.model = volume
+        self.bsdf_ref._cache = None
+        self.build_stats = {**volume.stats, "slices_auto": False, "build_s": time.perf_counter() - start}
+
+    def to_string(self):
+        return f"Slicing[{self.build_stats}]"
+
+
+def register():
+    mi.register_shape("slicing", lambda props: Slicing(props))
