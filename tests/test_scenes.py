@@ -40,6 +40,11 @@ BOUNDS = {
     "ddm_teapot_morph": (0.014, "docs/ddm.md, trade-off over map_resolution: FLIP 0.014 at 128, "
                                 "this scene's map_resolution"),
     "ddm_thorns_sphere": (0.048, "docs/ddm.md, Images: FLIP 0.048 at map_resolution 32"),
+    "slicing_cup_depth": (0.118, "docs/slicing.md, compare: slicing_cup_depth FLIP 0.118"),
+    "slicing_cup_hull": (0.107, "docs/slicing.md, compare: slicing_cup_hull FLIP 0.107"),
+    "slicing_donut": (0.124, "docs/slicing.md, compare: slicing_donut FLIP 0.124"),
+    "slicing_plane_grazing": (0.031, "docs/slicing.md, compare: slicing_plane_grazing FLIP 0.031"),
+    "slicing_spot_depth": (0.077, "docs/slicing.md, compare: slicing_spot_depth FLIP 0.077"),
     "vdm_spot": (0.033, "docs/vdm.md, Table 1 on Spot: VDM FLIP 0.0330 (raster vs raster)"),
     "vdm_torus": (0.0767, "docs/vdm.md, bench: flip_vs_reference 0.0767 (raster 256², same "
                           "integrator)"),
@@ -62,6 +67,11 @@ FAST = {
     "vdm_torus": {"reference": {"resolution": 512}, "approximation": {"vdm_res": 64}},
     "vdm_spot": {"approximation": {"vdm_res": 64}},
 }
+#: Scenes whose 64² error is above the figure their guide measured at 256² (the depth
+#: objects' view-dependent texturing blends three images whose texel footprint grows as the
+#: film shrinks): rendered at 128² instead, where they measure below it.
+for _name in ("slicing_cup_depth", "slicing_cup_hull", "slicing_spot_depth"):
+    FAST[_name] = {"reference": {"res": 128}, "approximation": {"res": 128}}
 PATH = {"type": "path", "max_depth": 2}
 
 
