@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 
 import drjit as dr
 import mitsuba as mi
@@ -29,6 +30,7 @@ import numpy as np
 from mi_displace.core import surfaces, tessellate
 from mi_displace.core.mesh_io import load_uv_mesh
 from mi_displace.core.texture_height import check_texture_finite, height_function
+from mi_displace.core.thickness import crossing_check, crossing_warning
 
 BASE_PARAMS = {
     "plane": (),
@@ -126,8 +128,16 @@ class Displaced(mi.Mesh):
             raise ValueError(f"displaced: tessellation of {self.id()!r} produced NaN/Inf "
                              "(check the height texture and 'scale')")
         v, f = t.vertex_count, t.face_count
-        self.build_stats = {"tessellate_s": time.perf_counter() - start,
-                            "vertices": v, "faces": f, "bytes": v * 8 * 4 + f * 3 * 4}
+        tessellate_s = time.perf_counter() - start
+        check = (crossing_check(t, thickness=self.base.thickness()) if self.base is not None
+                 else crossing_check(t, base_mesh=(self.mesh_data[0], self.mesh_data[3])))
+        message = crossing_warning(f"displaced {self.id()!r}", check)
+        if message:
+            warnings.warn(message, stacklevel=2)
+        self.build_stats = {"tessellate_s": tessellate_s, "vertices": v, "faces": f,
+                            "bytes": v * 8 * 4 + f * 3 * 4,
+                            "crossing_vertices": check["crossing_vertices"],
+                            "warnings": [message] if message else []}
 
     def traverse(self, cb):
         super().traverse(cb)

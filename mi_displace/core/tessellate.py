@@ -6,7 +6,10 @@ Two kinds of base:
   [0, 1]^2 with analytic shading normals
   N = P_u x P_v,  P_u = S_u + scale ((h - m) n_u + h_u n)  (likewise for v);
 * polygonal (a triangle mesh with UVs): every triangle split into level^2 triangles on a
-  barycentric grid, vertices shared across edges; normals from the displaced faces.
+  barycentric grid, vertices shared across edges, displaced along the *interpolated* (smooth)
+  vertex normal n; shading normals are those of the displaced smooth surface,
+  N = P_u x P_v with P_u = T_u + scale ((h - m) n_u + h_u n), where T_u is the interpolated
+  tangent dS/du projected onto the plane of n (so zero height shades like the smooth base).
 
 Everything per vertex / face is Dr.Jit; the returned buffers go straight into a mi.Mesh.
 Closed bases stay watertight: seam vertices are evaluated at the wrapped parameter and the
@@ -46,12 +49,19 @@ class Tessellation:
         normals: mi.Vector3f, V unit shading normals
         texcoords: mi.Point2f, V (u, v)
         faces: mi.Vector3u, F triangles (counter-clockwise seen from outside)
+        base_positions, base_normals: the undisplaced point S and unit normal n of each
+            vertex (mi.Point3f / mi.Vector3f, V), or None where not kept
+        displacement: mi.Float, V signed displacement scale (h - m) along n [object units],
+            or None (zero height)
     """
 
     positions: mi.Point3f
     normals: mi.Vector3f
     texcoords: mi.Point2f
     faces: mi.Vector3u
+    base_positions: mi.Point3f | None = None
+    base_normals: mi.Vector3f | None = None
+    displacement: mi.Float | None = None
 
     @property
     def vertex_count(self) -> int:
@@ -133,13 +143,15 @@ def displace_parametric(base: BaseSurface, height, scale: float, midlevel: float
     s = base.sample(u, v)
     p, n = mi.Point3f(s.p), mi.Vector3f(s.n)
     p_u, p_v = s.dp_du, s.dp_dv
+    base_p, disp = p, None
     if height is not None:
         h, grad = height(mi.Point2f(u, v))
         h = h - midlevel
         if base.poles:
             h = _pole_average(h, iv, nu, nv)
             grad = dr.select((iv == 0) | (iv == nv), 0.0, grad)
-        p = p + scale * h * n
+        disp = scale * h
+        p = p + disp * n
         p_u = p_u + scale * (h * s.dn_du + grad.x * n)
         p_v = p_v + scale * (h * s.dn_dv + grad.y * n)
     if base.poles:  # collapse each pole row onto one point
@@ -152,7 +164,8 @@ def displace_parametric(base: BaseSurface, height, scale: float, midlevel: float
     normal = dr.normalize(dr.select(degenerate, n, normal))
     flip = _winding_is_inward(base)
     return Tessellation(positions=p, normals=normal, texcoords=mi.Point2f(u_tex, v_tex),
-                        faces=grid_faces(nu, nv, base.poles, flip))
+                        faces=grid_faces(nu, nv, base.poles, flip), base_positions=base_p,
+                        base_normals=n, displacement=disp)
 
 
 def _pole_average(h: mi.Float, iv: mi.UInt32, nu: int, nv: int) -> mi.Float:
@@ -238,13 +251,81 @@ def subdivision_topology(faces: np.ndarray, weld: np.ndarray, level: int):
             group.astype(np.uint32), new_faces.astype(np.uint32))
 
 
+def vertex_frames(positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray,
+                  faces: np.ndarray):
+    """Per-vertex tangents dS/du, dS/dv and normal derivatives dn/du, dn/dv (NumPy, one-off).
+
+    Each triangle's constant Jacobians (from its positions, vertex normals and UVs) are
+    averaged over the triangles around a vertex, weighted by area; the normal derivatives
+    are projected onto the vertex's tangent plane (derivatives of the *unit* normal).
+    Triangles with a degenerate UV map contribute nothing.
+
+    Returns:
+        (s_u, s_v, n_u, n_v): four (V, 3) float32 arrays [object units per unit uv; per unit uv].
+    """
+    p = np.asarray(positions, np.float64)
+    nrm = np.asarray(normals, np.float64)
+    uv = np.asarray(uvs, np.float64)
+    f = np.asarray(faces, np.int64)
+    e1, e2 = p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]]
+    m1, m2 = nrm[f[:, 1]] - nrm[f[:, 0]], nrm[f[:, 2]] - nrm[f[:, 0]]
+    d1, d2 = uv[f[:, 1]] - uv[f[:, 0]], uv[f[:, 2]] - uv[f[:, 0]]
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    ok = np.abs(det) > 1e-12
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
+    # [X_u X_v] = [X_1 X_2] [d1 d2]^-1 for X = S (edges e) and the interpolated normal (m)
+    ju = lambda a, b: (a * d2[:, 1:2] - b * d1[:, 1:2]) * inv
+    jv = lambda a, b: (b * d1[:, 0:1] - a * d2[:, 0:1]) * inv
+    area = (0.5 * np.linalg.norm(np.cross(e1, e2), axis=1) * ok)[:, None]
+    out = []
+    for per_face in (ju(e1, e2), jv(e1, e2), ju(m1, m2), jv(m1, m2)):
+        acc = np.zeros_like(p)
+        for k in range(3):
+            np.add.at(acc, f[:, k], per_face * area)
+        out.append(acc)
+    weight = np.zeros(len(p))
+    for k in range(3):
+        np.add.at(weight, f[:, k], area[:, 0])
+    weight = np.where(weight > 0, weight, 1.0)[:, None]
+    s_u, s_v, n_u, n_v = (a / weight for a in out)
+    unit = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
+    n_u -= np.sum(n_u * unit, 1, keepdims=True) * unit
+    n_v -= np.sum(n_v * unit, 1, keepdims=True) * unit
+    return tuple(np.ascontiguousarray(a, np.float32) for a in (s_u, s_v, n_u, n_v))
+
+
+def smooth_displaced_normals(n, s_u, s_v, n_u, n_v, disp, grad, scale: float):
+    """Normal of the displaced smooth surface in the interpolated frame (Dr.Jit, per vertex).
+
+    N = P_u x P_v with P_u = T_u + disp n_u + scale h_u n, T_u = s_u - (s_u . n) n (likewise
+    for v), oriented along n; where it degenerates, n.
+
+    Args:
+        n: unit interpolated normal; s_u, s_v, n_u, n_v: interpolated frame (mi.Vector3f);
+        disp: scale (h - m) (mi.Float) or None; grad: dh/duv (mi.Vector2f) or None.
+    """
+    t_u = s_u - dr.dot(s_u, n) * n
+    t_v = s_v - dr.dot(s_v, n) * n
+    orientation = dr.sign(dr.dot(dr.cross(t_u, t_v), n))
+    p_u, p_v = t_u, t_v
+    if disp is not None:
+        p_u = p_u + disp * (n_u - dr.dot(n_u, n) * n) + scale * grad.x * n
+        p_v = p_v + disp * (n_v - dr.dot(n_v, n) * n) + scale * grad.y * n
+    normal = dr.cross(p_u, p_v) * orientation
+    degenerate = (dr.squared_norm(normal) <= 1e-12 * dr.squared_norm(p_u) * dr.squared_norm(p_v)) | (
+        orientation == 0)
+    return dr.normalize(dr.select(degenerate, n, normal))
+
+
 def displace_mesh(positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray,
                   faces: np.ndarray, height, scale: float, midlevel: float,
                   level: int) -> Tessellation:
     """Subdivide a triangle mesh with UVs and displace it along its interpolated normals.
 
-    The displacement of UV-seam twins is averaged so the surface stays closed; shading
-    normals are the area-weighted normals of the displaced faces around each position.
+    The displacement of UV-seam twins is averaged so the surface stays closed.  Shading
+    normals are those of the displaced *smooth* surface (:func:`smooth_displaced_normals`
+    over the interpolated frame of :func:`vertex_frames`), averaged over seam twins; at zero
+    height they are the interpolated base normals, as a smooth-shaded base mesh has.
 
     Args:
         positions: (V, 3) float vertex positions [object units].
@@ -260,29 +341,44 @@ def displace_mesh(positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray,
     idx = [mi.UInt32(src[:, k]) for k in range(3)]
     wts = [mi.Float(bary[:, k]) for k in range(3)]
 
-    def interp(cls, data):
+    def interp(data):
+        cls = mi.Vector3f if data.shape[1] == 3 else mi.Vector2f
         arr = cls(*[mi.Float(np.ascontiguousarray(data[:, k], np.float32))
                     for k in range(data.shape[1])])
         return sum((gather(cls, arr, idx[k]) * wts[k] for k in range(1, 3)),
                    gather(cls, arr, idx[0]) * wts[0])
 
-    p = mi.Point3f(interp(mi.Vector3f, positions))
-    n = dr.normalize(interp(mi.Vector3f, normals))
-    uv = mi.Point2f(interp(mi.Vector2f, uvs))
+    base_p = mi.Point3f(interp(positions))
+    n = dr.normalize(interp(normals))
+    uv = mi.Point2f(interp(uvs))
+    s_u, s_v, n_u, n_v = (interp(a) for a in vertex_frames(positions, normals, uvs, faces))
     groups = mi.UInt32(group)
     n_groups = int(group.max()) + 1
+    p, disp, grad = base_p, None, None
     if height is not None:
-        h, _ = height(uv)
-        d = scale * (h - midlevel) * n
+        h, grad = height(uv)
         # UV-seam twins: one displacement per position class (eq. of a welded vertex)
-        total = dr.zeros(mi.Vector3f, n_groups)
-        count = dr.zeros(mi.Float, n_groups)
-        scatter_add(total, d, groups)
-        dr.scatter_add(count, 1.0, groups)
-        p = p + gather(mi.Vector3f, total, groups) / dr.gather(mi.Float, count, groups)
+        disp = _group_mean(scale * (h - midlevel), groups, n_groups)
+        p = base_p + disp * n
+    normal = smooth_displaced_normals(n, s_u, s_v, n_u, n_v, disp, grad, scale)
+    normal = dr.normalize(_group_mean(normal, groups, n_groups))
     f = mi.Vector3u(*[mi.UInt32(new_faces[:, k]) for k in range(3)])
-    return Tessellation(positions=p, normals=face_weighted_normals(p, f, groups, n_groups, n),
-                        texcoords=uv, faces=f)
+    return Tessellation(positions=p, normals=normal, texcoords=uv, faces=f,
+                        base_positions=base_p, base_normals=n, displacement=disp)
+
+
+def _group_mean(value, groups: mi.UInt32, n_groups: int):
+    """Mean of ``value`` (mi.Float or a 3-vector) over the vertices of each group, per vertex."""
+    count = dr.zeros(mi.Float, n_groups)
+    dr.scatter_add(count, 1.0, groups)
+    count = dr.gather(mi.Float, count, groups)
+    if isinstance(value, mi.Float):
+        total = dr.zeros(mi.Float, n_groups)
+        dr.scatter_add(total, value, groups)
+        return dr.gather(mi.Float, total, groups) / count
+    total = dr.zeros(mi.Vector3f, n_groups)
+    scatter_add(total, value, groups)
+    return gather(mi.Vector3f, total, groups) / count
 
 
 def face_weighted_normals(p: mi.Point3f, faces: mi.Vector3u, groups: mi.UInt32,

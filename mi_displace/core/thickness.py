@@ -1,0 +1,75 @@
+"""Displacement deeper than the base is thick (issue 12.3): detect it, name the shape.
+
+Inward displacement larger than the local thickness of a thin shell (a teapot's wall, a
+leaf) carries the displaced surface through the other side of the base, and the path-traced
+reference silently turns dark.  :func:`crossing_check` casts, from every displaced vertex's
+base point S, one ray along sign(d) n (d = scale (h - m), the signed displacement) against
+the base mesh itself, through Mitsuba, vectorised; a hit closer than |d| is a crossing.
+Parametric bases have a known thickness (:meth:`BaseSurface.thickness`), so they need no rays.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mi_displace.core.tessellate import Tessellation
+
+
+def crossing_check(t: Tessellation, base_mesh: tuple | None = None,
+                   thickness: float = float("inf")) -> dict:
+    """Count vertices whose displacement passes through another part of the base.
+
+    Args:
+        t: a tessellation with ``base_positions``, ``base_normals`` and ``displacement``.
+        base_mesh: ``(positions (V, 3), faces (F, 3))`` of a polygonal base (object space),
+            or ``None`` for a parametric base of analytic ``thickness`` [object units].
+        thickness: distance along -n to the other side of a parametric base.
+
+    Returns:
+        ``{"crossing_vertices": int, "vertices": int, "max_depth_ratio": float}`` where
+        ``max_depth_ratio`` is the largest |d| / (distance to the base along sign(d) n)
+        (> 1 where the surface crosses; 0 when nothing is in reach).
+    """
+    n_vertices = t.vertex_count
+    if t.displacement is None:
+        return {"crossing_vertices": 0, "vertices": n_vertices, "max_depth_ratio": 0.0}
+    d = t.displacement
+    if base_mesh is None:
+        depth = dr.maximum(-d, 0.0)
+        ratio = depth / thickness if np.isfinite(thickness) else dr.zeros(mi.Float, n_vertices)
+        crossing = ratio > 1.0
+    else:
+        pos, faces = base_mesh
+        mesh = mi.Mesh("base", len(pos), len(faces), has_vertex_normals=False)
+        params = mi.traverse(mesh)
+        params["vertex_positions"] = mi.Float(np.asarray(pos, np.float32).ravel())
+        params["faces"] = mi.UInt32(np.asarray(faces, np.uint32).ravel())
+        params.update()
+        scene = mi.load_dict({"type": "scene", "base": mesh})
+        extent = float(np.linalg.norm(np.ptp(np.asarray(pos, np.float64), axis=0)))
+        reach = dr.abs(d)
+        direction = t.base_normals * dr.sign(d)
+        # start a hair off the base so the ray does not find the triangles at its own origin
+        eps = 1e-5 * extent
+        ray = mi.Ray3f(t.base_positions + eps * direction, direction)
+        ray.maxt = reach
+        active = reach > 2 * eps
+        pi = scene.ray_intersect_preliminary(ray, active=active)
+        hit = active & pi.is_valid() & (pi.t + eps < reach)
+        ratio = dr.select(hit, reach / dr.maximum(pi.t + eps, 1e-30), 0.0)
+        crossing = hit
+    count = int(dr.count(crossing)[0]) if n_vertices else 0
+    return {"crossing_vertices": count, "vertices": n_vertices,
+            "max_depth_ratio": float(dr.max(ratio)[0]) if n_vertices else 0.0}
+
+
+def crossing_warning(owner: str, check: dict) -> str | None:
+    """A user-facing warning for :func:`crossing_check`'s result, or ``None`` if clean."""
+    if not check["crossing_vertices"]:
+        return None
+    return (f"{owner}: displacement deeper than the local thickness of the base at "
+            f"{check['crossing_vertices']:,} of {check['vertices']:,} vertices (up to "
+            f"{check['max_depth_ratio']:.2f}x the distance to the base's other side): the "
+            "displaced surface passes through the base and the reference is wrong there; "
+            "lower 'scale' or raise 'midlevel'")
