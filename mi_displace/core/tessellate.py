@@ -140,32 +140,56 @@ def displace_parametric(base: BaseSurface, height, scale: float, midlevel: float
     # Evaluate at the wrapped parameter so seam twins are bit-identical.
     u = mi.Float(iu % nu) / nu if base.periodic_u else u_tex
     v = mi.Float(iv % nv) / nv if base.periodic_v else v_tex
+
+    def poles(h, grad):
+        return (_pole_average(h, iv, nu, nv),
+                dr.select((iv == 0) | (iv == nv), 0.0, grad)) if base.poles else (h, grad)
+
+    s, p, p_u, p_v, disp = displaced_partials(base, height, scale, midlevel, u, v, poles)
+    if base.poles:  # collapse each pole row onto one point
+        first = dr.select(iv == 0, 0, dr.select(iv == nv, nv * (nu + 1), i))
+        p = gather(mi.Point3f, p, first)
+    flip = _winding_is_inward(base)
+    return Tessellation(positions=p, normals=partials_normal(s, p_u, p_v),
+                        texcoords=mi.Point2f(u_tex, v_tex),
+                        faces=grid_faces(nu, nv, base.poles, flip), base_positions=mi.Point3f(s.p),
+                        base_normals=mi.Vector3f(s.n), displacement=disp)
+
+
+def displaced_partials(base: BaseSurface, height, scale: float, midlevel: float,
+                       u: mi.Float, v: mi.Float, adjust=None):
+    """P = S + scale (h - m) n and its partials P_u, P_v at (u, v) (Dr.Jit, per point).
+
+    P_u = S_u + scale ((h - m) n_u + h_u n) (likewise v).  ``adjust(h - m, grad)`` may
+    replace the height and gradient first (pole rows, seam twins).
+
+    Returns:
+        (s, p, p_u, p_v, disp): the base's :class:`SurfaceSample`, mi.Point3f, two
+        mi.Vector3f and the signed displacement mi.Float (``None`` without a height).
+    """
     s = base.sample(u, v)
     p, n = mi.Point3f(s.p), mi.Vector3f(s.n)
-    p_u, p_v = s.dp_du, s.dp_dv
-    base_p, disp = p, None
+    p_u, p_v, disp = s.dp_du, s.dp_dv, None
     if height is not None:
         h, grad = height(mi.Point2f(u, v))
         h = h - midlevel
-        if base.poles:
-            h = _pole_average(h, iv, nu, nv)
-            grad = dr.select((iv == 0) | (iv == nv), 0.0, grad)
+        if adjust is not None:
+            h, grad = adjust(h, grad)
         disp = scale * h
         p = p + disp * n
         p_u = p_u + scale * (h * s.dn_du + grad.x * n)
         p_v = p_v + scale * (h * s.dn_dv + grad.y * n)
-    if base.poles:  # collapse each pole row onto one point
-        first = dr.select(iv == 0, 0, dr.select(iv == nv, nv * (nu + 1), i))
-        p = gather(mi.Point3f, p, first)
+    return s, p, p_u, p_v, disp
+
+
+def partials_normal(s, p_u: mi.Vector3f, p_v: mi.Vector3f) -> mi.Vector3f:
+    """Unit normal P_u x P_v oriented like the base's n; n itself where it degenerates."""
+    n = mi.Vector3f(s.n)
     normal = dr.cross(p_u, p_v)
     orientation = dr.sign(dr.dot(dr.cross(s.dp_du, s.dp_dv), n))
     normal *= orientation
     degenerate = dr.squared_norm(normal) <= 1e-12 * dr.squared_norm(p_u) * dr.squared_norm(p_v)
-    normal = dr.normalize(dr.select(degenerate, n, normal))
-    flip = _winding_is_inward(base)
-    return Tessellation(positions=p, normals=normal, texcoords=mi.Point2f(u_tex, v_tex),
-                        faces=grid_faces(nu, nv, base.poles, flip), base_positions=base_p,
-                        base_normals=n, displacement=disp)
+    return dr.normalize(dr.select(degenerate, n, normal))
 
 
 def _pole_average(h: mi.Float, iv: mi.UInt32, nu: int, nv: int) -> mi.Float:
@@ -336,10 +360,32 @@ def displace_mesh(positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray,
             :func:`displace_parametric`.
         level: subdivision level (each edge split into ``level`` segments).
     """
+    src, bary, group, new_faces = subdivision_topology(faces, weld_classes(positions), level)
+    return displace_mesh_vertices(positions, normals, uvs, faces, src, bary, group, new_faces,
+                                  height, scale, midlevel)
+
+
+def weld_classes(positions: np.ndarray) -> np.ndarray:
+    """(V,) int position class of each vertex (equal float32 positions share one)."""
     _, weld = np.unique(np.asarray(positions, np.float32), axis=0, return_inverse=True)
-    src, bary, group, new_faces = subdivision_topology(faces, weld.ravel(), level)
-    idx = [mi.UInt32(src[:, k]) for k in range(3)]
-    wts = [mi.Float(bary[:, k]) for k in range(3)]
+    return weld.ravel()
+
+
+def displace_mesh_vertices(positions, normals, uvs, faces, src: np.ndarray, bary: np.ndarray,
+                           group: np.ndarray, new_faces: np.ndarray, height, scale: float,
+                           midlevel: float) -> Tessellation:
+    """Displace the vertices of any refinement of a base mesh (:func:`displace_mesh`'s kernel).
+
+    Args:
+        positions, normals, uvs, faces: the base mesh (as :func:`displace_mesh`).
+        src: (N, 3) base vertex ids and ``bary``: (N, 3) weights of each new vertex.
+        group: (N,) position class: vertices of one class get one displacement and one
+            normal (UV-seam twins stay on one point).
+        new_faces: (F', 3) triangles over the new vertices.
+        height, scale, midlevel: as :func:`displace_parametric`.
+    """
+    idx = [mi.UInt32(np.ascontiguousarray(src[:, k], np.uint32)) for k in range(3)]
+    wts = [mi.Float(np.ascontiguousarray(bary[:, k], np.float32)) for k in range(3)]
 
     def interp(data):
         cls = mi.Vector3f if data.shape[1] == 3 else mi.Vector2f
@@ -352,22 +398,23 @@ def displace_mesh(positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray,
     n = dr.normalize(interp(normals))
     uv = mi.Point2f(interp(uvs))
     s_u, s_v, n_u, n_v = (interp(a) for a in vertex_frames(positions, normals, uvs, faces))
-    groups = mi.UInt32(group)
+    groups = mi.UInt32(np.ascontiguousarray(group, np.uint32))
     n_groups = int(group.max()) + 1
     p, disp, grad = base_p, None, None
     if height is not None:
         h, grad = height(uv)
         # UV-seam twins: one displacement per position class (eq. of a welded vertex)
-        disp = _group_mean(scale * (h - midlevel), groups, n_groups)
+        disp = group_mean(scale * (h - midlevel), groups, n_groups)
         p = base_p + disp * n
     normal = smooth_displaced_normals(n, s_u, s_v, n_u, n_v, disp, grad, scale)
-    normal = dr.normalize(_group_mean(normal, groups, n_groups))
-    f = mi.Vector3u(*[mi.UInt32(new_faces[:, k]) for k in range(3)])
+    normal = dr.normalize(group_mean(normal, groups, n_groups))
+    f = mi.Vector3u(*[mi.UInt32(np.ascontiguousarray(new_faces[:, k], np.uint32))
+                      for k in range(3)])
     return Tessellation(positions=p, normals=normal, texcoords=uv, faces=f,
                         base_positions=base_p, base_normals=n, displacement=disp)
 
 
-def _group_mean(value, groups: mi.UInt32, n_groups: int):
+def group_mean(value, groups: mi.UInt32, n_groups: int):
     """Mean of ``value`` (mi.Float or a 3-vector) over the vertices of each group, per vertex."""
     count = dr.zeros(mi.Float, n_groups)
     dr.scatter_add(count, 1.0, groups)

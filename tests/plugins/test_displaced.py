@@ -186,3 +186,30 @@ def test_thin_shell_warning_reaches_compare_metrics(variant, tmp_path):
     saved = json.loads((tmp_path / "out" / "metrics.json").read_text())
     assert len(saved["warnings"]) == 1
     assert saved["warnings"][0].startswith("reference: displaced 'thin'")
+
+
+def test_render_explain_prints_build_stats_per_shape(variant, tmp_path, capsys):
+    """`mi-displace render --explain`: every shape with build_stats, the dicing rate and faces;
+    a shape diced for the scene's sensor without a <ref> is diced by the loader."""
+    from mi_displace import cli
+
+    (tmp_path / "s.xml").write_text("""<scene version="3.0.0"><integrator type="direct"/>
+        <sensor type="perspective" id="cam"><float name="fov" value="40"/>
+            <transform name="to_world"><lookat origin="0, -4, 0" target="0, 0, 0" up="0, 0, 1"/></transform>
+            <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/></film>
+        </sensor>
+        <shape type="displaced" id="ball"><float name="dicing_rate" value="2"/>
+            <texture type="ripples" name="height"/><ref id="cam"/></shape>
+        <shape type="displaced" id="loose"><float name="dicing_rate" value="2"/>
+            <transform name="to_world"><translate x="3"/></transform></shape>
+        <shape type="sphere" id="plain"/></scene>""")
+    out = tmp_path / "img.exr"
+    with pytest.warns(UserWarning, match="'loose'.*needs a sensor"):
+        assert cli.main(["render", str(tmp_path / "s.xml"), "--explain", "--spp", "1",
+                         "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "shape 'ball' (Displaced):" in text and "shape 'loose' (Displaced):" in text
+    assert "'plain'" not in text
+    assert text.count("dicing_rate: 2") == 2 and "faces:" in text and "sensors: 1" in text
+    assert out.is_file()
+    assert cli.main(["render", str(tmp_path / "s.xml"), "--explain"]) == 0  # explain only
