@@ -18,7 +18,8 @@ first, e.g. with ``mi_displace.bake.unwrap.unwrap`` (xatlas)).  ``scale`` and ``
 ``mi.traverse`` (re-displacement keeps the topology).
 
 Screen-adaptive dicing (:mod:`mi_displace.core.dicing`, Cycles' meaning): ``dicing_rate``
-(pixels per micro-edge, instead of ``resolution`` / ``subdivision`` / ``edge_length``) and
+(pixels per micro-edge, instead of ``resolution`` / ``subdivision`` / ``edge_length``;
+``tessellation`` = ``uniform`` / ``dicing`` chooses when a scene gives both) and
 ``offscreen_dicing_scale`` (default 4, coarser outside the view frustum and behind the
 camera).  The sensors are those referenced in the shape (``<ref id="camera"/>``, any number:
 the finest need wins); without one the shape dices coarsely and warns until
@@ -104,16 +105,31 @@ class Displaced(mi.Mesh):
                 raise ValueError(f"displaced: '{key}' must be finite, got {val}")
         resolution = props.get("resolution", None)
         edge_length = props.get("edge_length", None)
-        self.dicing = "dicing_rate" in props
+        uniform_keys = [k for k in ("resolution", "edge_length", "subdivision") if k in props]
+        if "tessellation" in props:  # explicit switch: the other mode's settings may stay
+            mode = props.get("tessellation")
+            if mode not in ("uniform", "dicing"):
+                raise ValueError(f"displaced: 'tessellation' must be 'uniform' or 'dicing', got {mode!r}")
+        else:
+            mode = "dicing" if "dicing_rate" in props else "uniform"
+            if mode == "dicing" and uniform_keys:
+                raise ValueError(f"displaced: 'dicing_rate' replaces {', '.join(map(repr, uniform_keys))}; "
+                                 "give one or the other (or choose with 'tessellation')")
+        self.dicing = mode == "dicing"
         if self.dicing:
-            clash = [k for k in ("resolution", "edge_length", "subdivision") if k in props]
-            if clash:
-                raise ValueError(f"displaced: 'dicing_rate' replaces {', '.join(map(repr, clash))}; "
-                                 "give one or the other")
+            if "dicing_rate" not in props:
+                raise ValueError("displaced: tessellation 'dicing' needs 'dicing_rate'")
             rate, off = dicing.check_rates(props.get("dicing_rate"),
                                            props.get("offscreen_dicing_scale", 4.0))
-        elif "offscreen_dicing_scale" in props:
+            for k in uniform_keys:  # read (unused here), so Mitsuba does not call them typos
+                props.get(k)
+            resolution = edge_length = None
+        elif "offscreen_dicing_scale" in props and "tessellation" not in props:
             raise ValueError("displaced: 'offscreen_dicing_scale' needs 'dicing_rate'")
+        else:
+            for k in ("dicing_rate", "offscreen_dicing_scale"):
+                if k in props:
+                    props.get(k)
         # load_dict/XML hand over a double-precision transform; the mesh is float32
         to_world = mi.ScalarTransform4f(mi.ScalarMatrix4f(np.array(
             props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float32)))

@@ -415,6 +415,20 @@ def linear_scale(to_world: np.ndarray) -> float:
     return float(np.linalg.svd(to_world[:3, :3], compute_uv=False).max())
 
 
+def world_extent(base: BaseSurface, to_world: np.ndarray) -> tuple[float, float]:
+    """World lengths of the longest u- and v-isoparametric curves (polylines of 64 steps
+    along 9 curves each), so an anisotropic ``to_world`` gets patches of even size."""
+    t = np.linspace(0, 1, 65)
+    c = np.linspace(0, 1, 9)
+    out = []
+    for along_u in (True, False):
+        a, b = np.meshgrid(t, c)   # a along the curve, b across curves
+        u, v = (a, b) if along_u else (b, a)
+        pts = world_points(base, to_world, *wrap(base, u.ravel(), v.ravel())).reshape(9, 65, 3)
+        out.append(float(np.linalg.norm(np.diff(pts, axis=1), axis=2).sum(1).max()))
+    return out[0], out[1]
+
+
 def parametric_grid(base: BaseSurface, to_world: np.ndarray, views, bound: float, rate: float,
                     offscreen_scale: float) -> tuple[int, int]:
     """Patch grid (nu, nv) so a patch side spans about :data:`PATCH_EDGES` micro-edges where
@@ -423,8 +437,7 @@ def parametric_grid(base: BaseSurface, to_world: np.ndarray, views, bound: float
     u, v = np.meshgrid(g, g)
     pts = world_points(base, to_world, *wrap(base, u.ravel(), v.ravel()))
     micro = rate * float(pixel_size(views, pts, bound, offscreen_scale).min())
-    stretch = linear_scale(to_world)
-    ext_u, ext_v = (stretch * x for x in base.extent())
+    ext_u, ext_v = world_extent(base, to_world)
     nu = max(1, math.ceil(ext_u / (PATCH_EDGES * micro)))
     nv = max(1, math.ceil(ext_v / (PATCH_EDGES * micro)))
     if nu * nv > MAX_PATCHES:

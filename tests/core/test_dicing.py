@@ -241,3 +241,26 @@ def test_zero_height_dices_the_base(variant):
     scene = sphere_scene(camera([0, -3.2, 0]), scale=0.0)
     r = np.linalg.norm(np.asarray(mi.traverse(scene.shapes()[0])["vertex_positions"]).reshape(-1, 3), axis=1)
     assert np.allclose(r, 1.0, atol=1e-6) and scene.shapes()[0].build_stats["bound"] == 0
+
+
+def test_mesh_base_dices_finer_near_the_camera_and_stays_watertight(variant, tmp_path):
+    ico = trimesh.creation.icosphere(2)
+    v = ico.vertices
+    uv = np.stack([np.arctan2(v[:, 1], v[:, 0]) / (2 * np.pi) + 0.5,
+                   np.arccos(np.clip(v[:, 2], -1, 1)) / np.pi], 1)
+    ico.visual = trimesh.visual.TextureVisuals(uv=uv)
+    ico.export(tmp_path / "ico.ply")
+    scene = mi.load_dict({"type": "scene", "cam0": camera([0, -2.5, 0], res=64),
+                          "s": {"type": "displaced", "filename": str(tmp_path / "ico.ply"),
+                                "dicing_rate": 1.0, "scale": 0.03, "height": {"type": "ripples"},
+                                "r": {"type": "ref", "id": "cam0"}}})
+    shape = scene.shapes()[0]
+    assert shape.build_stats["patches"] == len(ico.faces)
+    m = shape_mesh(shape)
+    assert m.is_watertight and m.is_winding_consistent and m.euler_number == 2
+    edges = m.edges_unique_length
+    mid_y = m.vertices[m.edges_unique].mean(1)[:, 1]
+    front, back = np.median(edges[mid_y < -0.5]), np.median(edges[mid_y > 0.5])
+    assert front < back / 1.5          # the camera side is diced finer
+    n = np.asarray(mi.traverse(shape)["vertex_normals"])
+    assert np.all(np.isfinite(n))
