@@ -42,7 +42,7 @@ SPP = 32
 SWEEPS = {  # scene -> (extra -D parameters, uniform resolutions)
     "displaced_sphere": ({}, [128, 256, 512, 1024, 2048]),
     "bump_vs_displaced": ({"mode": "reference"}, [128, 256, 512, 1024, 2048]),
-    "displaced_horizon": ({"mode": "reference"}, [256, 512, 1024, 2048]),
+    "displaced_horizon": ({"mode": "uniform"}, [256, 512, 1024, 2048]),
 }
 RATES = [0.5, 1.0, 2.0, 4.0]
 REFERENCE_RATE = 0.5
@@ -154,7 +154,8 @@ def sweep(name: str) -> dict:
     def load(**params):
         return lambda: scenes.load(path, **{**dicing_params, **params})[0]
 
-    ref, (ref0, ref1) = _measure(load(dicing_rate=REFERENCE_RATE, offscreen_dicing_scale=1)
+    ref, (ref0, ref1) = _measure(lambda: scenes.load(path, mode="reference",
+                                                     reference_rate=REFERENCE_RATE)[0]
                                  if name == "displaced_horizon" else
                                  _with_offscreen(path, dicing_params, REFERENCE_RATE), seeds=(0, 1))
     out = {"reference": {**ref, "dicing_rate": REFERENCE_RATE, "offscreen_dicing_scale": 1},
