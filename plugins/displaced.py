@@ -76,7 +76,9 @@ def _mesh_level(mesh_data, props, edge_length) -> int:
 
 
 def _build(base, mesh_data, grid, height_texture, scale, midlevel) -> tessellate.Tessellation:
-    """Tessellate a parametric (``grid`` = (nu, nv)) or mesh (``grid`` = level) base."""
+    """Tessellate a parametric (``grid`` = (nu, nv)) or mesh (``grid`` = level) base.
+
+    ``scale`` and ``midlevel`` are floats or ``mi.Float``s (then differentiable)."""
     if base is not None:
         nu, nv = grid
         height = None if height_texture is None else height_function(
@@ -167,23 +169,27 @@ class Displaced(mi.Mesh):
 
     # -- building ------------------------------------------------------------------------
     def _build(self, name: str | None = None):
-        """(Tessellation, stats) for the current parameters (uniform or diced)."""
-        scale, midlevel = float(self.scale[0]), float(self.midlevel[0])
-        if not self.dicing:
-            return _build(self.base, self.mesh_data, self.grid, self.height_texture, scale,
-                          midlevel), {"mode": "uniform"}
-        return self._dice(name or self.id(), scale, midlevel)
+        """(Tessellation, stats) for the current parameters (uniform or diced).
 
-    def _dice(self, name: str, scale: float, midlevel: float):
+        ``scale`` and ``midlevel`` enter the kernels as the traversed ``mi.Float``s, so a
+        gradient enabled on them (or on the height texture's data) reaches the vertices."""
+        if not self.dicing:
+            return _build(self.base, self.mesh_data, self.grid, self.height_texture, self.scale,
+                          self.midlevel), {"mode": "uniform"}
+        return self._dice(name or self.id())
+
+    def _dice(self, name: str):
         """Staged dicing: edge rates -> topology (kept if no rate moved) -> vertices."""
         owner = f"displaced {name!r}"
+        scale, midlevel = self.scale, self.midlevel
         rate, off = float(self.dicing_rate[0]), float(self.offscreen_dicing_scale[0])
         dicing.check_rates(rate, off)
         times, rebuilt, warn = {}, [], []
         clock = time.perf_counter()
         views = [dicing.sensor_view(s) for s in self.sensors]
         lo, hi = self._height_range
-        bound = abs(scale) * max(abs(hi - midlevel), abs(lo - midlevel)) * dicing.linear_scale(
+        scale_f, midlevel_f = float(dr.detach(scale)[0]), float(dr.detach(midlevel)[0])
+        bound = abs(scale_f) * max(abs(hi - midlevel_f), abs(lo - midlevel_f)) * dicing.linear_scale(
             self.to_world_np)
         if not views:
             warn.append(f"{owner}: dicing_rate needs a sensor and none is referenced "
@@ -292,10 +298,13 @@ class Displaced(mi.Mesh):
         return bool(self.sensors) and not getattr(self, "_scene_sensors", False)
 
     def _dice_key(self) -> tuple:
-        """Everything the diced mesh depends on (sensor states and the four parameters)."""
-        return ([dicing.sensor_view(s).key() for s in self.sensors], float(self.scale[0]),
-                float(self.midlevel[0]), float(self.dicing_rate[0]),
-                float(self.offscreen_dicing_scale[0]))
+        """Everything the diced mesh depends on (sensor states and the four parameters);
+        a parameter with a gradient enabled always rebuilds (its graph must be fresh)."""
+        grad = dr.grad_enabled(self.scale) or dr.grad_enabled(self.midlevel)
+        return ([dicing.sensor_view(s).key() for s in self.sensors],
+                float(dr.detach(self.scale)[0]), float(dr.detach(self.midlevel)[0]),
+                float(self.dicing_rate[0]), float(self.offscreen_dicing_scale[0]),
+                object() if grad else None)
 
     def _rebuild_if_needed(self) -> bool:
         key = self._dice_key()
@@ -309,8 +318,11 @@ class Displaced(mi.Mesh):
 
     def traverse(self, cb):
         super().traverse(cb)
-        cb.put("scale", self.scale, mi.ParamFlags.NonDifferentiable)
-        cb.put("midlevel", self.midlevel, mi.ParamFlags.NonDifferentiable)
+        # differentiable: the vertices are recomputed from them with the AD graph attached
+        cb.put("scale", self.scale, mi.ParamFlags.Differentiable)
+        cb.put("midlevel", self.midlevel, mi.ParamFlags.Differentiable)
+        if self.height_texture is not None:  # its edits re-displace (never stale)
+            cb.put("height", self.height_texture, mi.ParamFlags.Differentiable)
         if self.dicing:
             cb.put("dicing_rate", self.dicing_rate, mi.ParamFlags.NonDifferentiable)
             cb.put("offscreen_dicing_scale", self.offscreen_dicing_scale,
@@ -318,11 +330,17 @@ class Displaced(mi.Mesh):
 
     def parameters_changed(self, keys=[]):
         own = {"scale", "midlevel", "dicing_rate", "offscreen_dicing_scale"}
-        if own & set(keys):
+        texture = any(k == "height" or k.startswith("height.") for k in keys)
+        if own & set(keys) or texture:
             for key in ("scale", "midlevel"):
-                if not math.isfinite(float(getattr(self, key)[0])):
+                if not math.isfinite(float(dr.detach(getattr(self, key))[0])):
                     raise ValueError(f"displaced: '{key}' must be finite")
+            if texture:
+                check_texture_finite(self.height_texture)
             if self.dicing:
+                if texture:  # the height range (hence the bound) may have moved
+                    self._height_range = _height_range(self.height_texture)
+                    self._cache.pop("key", None)
                 self._rebuild_if_needed()
             else:
                 start = time.perf_counter()

@@ -34,7 +34,7 @@ def crossing_check(t: Tessellation, base_mesh: tuple | None = None,
     n_vertices = t.vertex_count
     if t.displacement is None:
         return {"crossing_vertices": 0, "vertices": n_vertices, "max_depth_ratio": 0.0}
-    d = t.displacement
+    d = dr.detach(t.displacement)
     if base_mesh is None:
         depth = dr.maximum(-d, 0.0)
         ratio = depth / thickness if np.isfinite(thickness) else dr.zeros(mi.Float, n_vertices)
@@ -49,10 +49,10 @@ def crossing_check(t: Tessellation, base_mesh: tuple | None = None,
         scene = mi.load_dict({"type": "scene", "base": mesh})
         extent = float(np.linalg.norm(np.ptp(np.asarray(pos, np.float64), axis=0)))
         reach = dr.abs(d)
-        direction = t.base_normals * dr.sign(d)
+        direction = dr.detach(t.base_normals) * dr.sign(d)
         # start a hair off the base so the ray does not find the triangles at its own origin
         eps = 1e-5 * extent
-        ray = mi.Ray3f(t.base_positions + eps * direction, direction)
+        ray = mi.Ray3f(dr.detach(t.base_positions) + eps * direction, direction)
         ray.maxt = reach
         active = reach > 2 * eps
         pi = scene.ray_intersect_preliminary(ray, active=active)
