@@ -118,3 +118,21 @@ def test_scale_gradient_on_a_mesh_base(variant, tmp_path):
     print(f"mesh scale: AD {ad:.6g}, FD {fd:.6g}")
     assert np.sign(ad) == np.sign(fd) and abs(fd) > 1e-5
     assert abs(ad - fd) <= 0.15 * abs(fd), (ad, fd)
+
+
+@pytest.mark.parametrize("key,props", [
+    ("ball.height.phase", {}),
+    ("ball.dicing_rate", {"dicing_rate": 2.0}),
+])
+def test_gradient_on_a_parameter_that_cannot_have_one_is_refused(variant, key, props):
+    sensor = {"type": "perspective", "film": {"type": "hdrfilm", "width": 16, "height": 16},
+              "to_world": mi.ScalarTransform4f().look_at(origin=[0, -4, 0], target=[0, 0, 0], up=[0, 0, 1])}
+    shape = {"type": "displaced", "base": "sphere", "height": {"type": "ripples"}, **props}
+    if not props:
+        shape["resolution"] = 16
+    sc = mi.load_dict({"type": "scene", "cam": sensor,
+                       "ball": {**shape, **({"r": {"type": "ref", "id": "cam"}} if props else {})}})
+    params = mi.traverse(sc)
+    dr.enable_grad(params[key])
+    with pytest.raises(ValueError, match=key.split(".", 1)[1].replace(".", r"\.")):
+        params.update()
