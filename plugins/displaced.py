@@ -276,7 +276,7 @@ class Displaced(mi.Mesh):
                                                    self.mesh_data[2]),
                                      other_side=self._signed_displacement()))
         messages = list(stats.pop("warnings", []))
-        message = crossing_warning(f"displaced {self.id()!r}", check)
+        message = crossing_warning(f"displaced {self.id() or '(no id)'!r}", check)
         if message:
             messages.append(message)
         for m in messages:
