@@ -1,6 +1,7 @@
 """Command line interface: ``mi-displace [--variant V] [--quiet] {render,compare,showcase,bench} ...``.
 
-* ``render SCENE.xml [-D name=value ...] [--spp N] [--seed S] --out IMG.(exr|png)``
+* ``render SCENE.xml [-D name=value ...] [--spp N] [--seed S] --out IMG.(exr|png) [--explain]``
+  (``--explain`` prints every shape's and BSDF's ``build_stats``; alone it only loads)
 * ``compare SCENE.xml --out DIR [-D name=value ...] [--quick] [--max-spp N] [--target-ratio R]``
   runs the comparison protocol (:mod:`mi_displace.evaluate.compare`); ``--quick`` caps the
   reference at :data:`QUICK_MAX_SPP` samples per pixel, as for ``showcase``.
@@ -131,7 +132,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--spp", type=_positive_int, help="samples per pixel (default: the scene's)")
     p.add_argument("--seed", type=_seed, default=0, help="sampler seed (default 0)")
     p.add_argument("--bits", type=int, choices=(8, 16), default=8, help="bits per channel of a PNG")
-    p.add_argument("--out", type=Path, required=True, help="output image, .exr (linear) or .png (sRGB)")
+    p.add_argument("--out", type=Path, help="output image, .exr (linear) or .png (sRGB)")
+    p.add_argument("--explain", action="store_true",
+                   help="print what each plugin built and why (its build_stats), per shape/BSDF; "
+                        "without --out, only load and explain")
 
     p = sub.add_parser("compare", help="compare a scene's approximation with its reference")
     p.add_argument("scene", type=Path, help="scene XML file following the comparison convention")
@@ -189,11 +193,18 @@ def summary_table(rows: list[dict]) -> str:
 def _cmd_render(args) -> int:
     from mi_displace.core.io import image_format, write_image
     from mi_displace.evaluate.metrics import assert_finite
-    from mi_displace.render.scene import load, render
+    from mi_displace.render.scene import explain, load, render
 
-    image_format(args.out, "--out")
+    if args.out is None and not args.explain:
+        raise UsageError("render: --out is required (or --explain alone to load and explain)")
+    if args.out is not None:
+        image_format(args.out, "--out")
     with stage(f"loading {args.scene}"):
         scene, timings = load(args.scene, **dict(args.defines))
+    if args.explain:
+        print(explain_text(explain(scene), timings["build_s"]))
+    if args.out is None:
+        return 0
     with stage(f"rendering {args.scene.name}"):
         image, seconds = render(scene, spp=args.spp, seed=args.seed, progress=None)
     assert_finite(image, f"rendered image of {args.scene}")
@@ -207,6 +218,23 @@ def _cmd_render(args) -> int:
 def _max_spp(args) -> int:
     """The reference spp cap of ``compare`` / ``showcase``: ``--max-spp``, else by ``--quick``."""
     return args.max_spp or (QUICK_MAX_SPP if args.quick else DEFAULT_MAX_SPP)
+
+
+def explain_text(rows: list[dict], build_s: float) -> str:
+    """``render --explain`` report: one block per plugin with ``build_stats``."""
+    lines = [f"scene build (XML, plugins, acceleration structure): {build_s:.3f} s"]
+    if not rows:
+        lines.append("no plugin reports build_stats")
+    for row in rows:
+        lines.append(f"{row['kind']} {row['id']!r} ({row['type']}):")
+        for key, value in row.items():
+            if key in ("id", "kind", "type"):
+                continue
+            if isinstance(value, list) and value and all(isinstance(v, str) for v in value):
+                lines += [f"  {key}:"] + [f"    - {v}" for v in value]
+            else:
+                lines.append(f"  {key}: {_fmt(value)}")
+    return "\n".join(lines)
 
 
 def _cmd_compare(args) -> int:

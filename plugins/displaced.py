@@ -16,19 +16,36 @@ Mesh bases: ``base="mesh"`` with ``filename`` (PLY/OBJ with UVs) and ``subdivisi
 splits per triangle) or ``edge_length``.  Meshes without UVs are refused (unwrap them
 first, e.g. with ``mi_displace.bake.unwrap.unwrap`` (xatlas)).  ``scale`` and ``midlevel`` are editable through
 ``mi.traverse`` (re-displacement keeps the topology).
+
+Screen-adaptive dicing (:mod:`mi_displace.core.dicing`, Cycles' meaning): ``dicing_rate``
+(pixels per micro-edge, instead of ``resolution`` / ``subdivision`` / ``edge_length``;
+``tessellation`` = ``uniform`` / ``dicing`` chooses when a scene gives both) and
+``offscreen_dicing_scale`` (default 4, coarser outside the view frustum and behind the
+camera).  The sensors are those referenced in the shape (``<ref id="camera"/>``, any number:
+the finest need wins); without one the shape dices coarsely and warns until
+:func:`mi_displace.core.dicing.redice` gives it the scene's sensors (the mi-displace loaders
+do).  ``dicing_rate`` and ``offscreen_dicing_scale`` are editable through ``mi.traverse``;
+every edit (and ``redice`` after a camera edit) recomputes the edge rates and rebuilds
+only what changed: the topology is kept when no edge rate moved.
+
+``build_stats`` (a dict attribute, printed by ``mi-displace render --explain``): mode, rate,
+patches, edge segments, vertices, faces, bytes, seconds per stage, what was rebuilt, and
+``warnings`` (displacement deeper than the base's thickness, pending dicing).
 """
 from __future__ import annotations
 
 import math
 import time
+import warnings
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.core import surfaces, tessellate
+from mi_displace.core import dicing, surfaces, tessellate
 from mi_displace.core.mesh_io import load_uv_mesh
 from mi_displace.core.texture_height import check_texture_finite, height_function
+from mi_displace.core.thickness import crossing_check, crossing_warning
 from mi_displace.plugins._guard import constructor
 
 BASE_PARAMS = {
@@ -60,7 +77,9 @@ def _mesh_level(mesh_data, props, edge_length) -> int:
 
 
 def _build(base, mesh_data, grid, height_texture, scale, midlevel) -> tessellate.Tessellation:
-    """Tessellate a parametric (``grid`` = (nu, nv)) or mesh (``grid`` = level) base."""
+    """Tessellate a parametric (``grid`` = (nu, nv)) or mesh (``grid`` = level) base.
+
+    ``scale`` and ``midlevel`` are floats or ``mi.Float``s (then differentiable)."""
     if base is not None:
         nu, nv = grid
         height = None if height_texture is None else height_function(
@@ -74,6 +93,10 @@ class Displaced(mi.Mesh):
     """True displacement: a tessellated mesh P = S + scale (h - midlevel) n."""
 
     def __init__(self, props: mi.Properties):
+        # sensors referenced for dicing (Mitsuba's Shape would take one as its own child)
+        self.sensors = [props.get(k) for k in props.keys() if isinstance(props.get(k), mi.Sensor)]
+        for k in [k for k in props.keys() if isinstance(props.get(k), mi.Sensor)]:
+            del props[k]
         base_name = props.get("base", "mesh" if "filename" in props else "sphere")
         height = props.get("height", None)
         if height is not None and not isinstance(height, mi.Texture):
@@ -85,6 +108,31 @@ class Displaced(mi.Mesh):
                 raise ValueError(f"displaced: '{key}' must be finite, got {val}")
         resolution = props.get("resolution", None)
         edge_length = props.get("edge_length", None)
+        uniform_keys = [k for k in ("resolution", "edge_length", "subdivision") if k in props]
+        if "tessellation" in props:  # explicit switch: the other mode's settings may stay
+            mode = props.get("tessellation")
+            if mode not in ("uniform", "dicing"):
+                raise ValueError(f"displaced: 'tessellation' must be 'uniform' or 'dicing', got {mode!r}")
+        else:
+            mode = "dicing" if "dicing_rate" in props else "uniform"
+            if mode == "dicing" and uniform_keys:
+                raise ValueError(f"displaced: 'dicing_rate' replaces {', '.join(map(repr, uniform_keys))}; "
+                                 "give one or the other (or choose with 'tessellation')")
+        self.dicing = mode == "dicing"
+        if self.dicing:
+            if "dicing_rate" not in props:
+                raise ValueError("displaced: tessellation 'dicing' needs 'dicing_rate'")
+            rate, off = dicing.check_rates(props.get("dicing_rate"),
+                                           props.get("offscreen_dicing_scale", 4.0))
+            for k in uniform_keys:  # read (unused here), so Mitsuba does not call them typos
+                props.get(k)
+            resolution = edge_length = None
+        elif "offscreen_dicing_scale" in props and "tessellation" not in props:
+            raise ValueError("displaced: 'offscreen_dicing_scale' needs 'dicing_rate'")
+        else:
+            for k in ("dicing_rate", "offscreen_dicing_scale"):
+                if k in props:
+                    props.get(k)
         # load_dict/XML hand over a double-precision transform; the mesh is float32
         to_world = mi.ScalarTransform4f(mi.ScalarMatrix4f(np.array(
             props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float32)))
@@ -95,22 +143,118 @@ class Displaced(mi.Mesh):
             if "filename" not in props:
                 raise ValueError("displaced: base 'mesh' needs a 'filename' (PLY/OBJ with UVs)")
             mesh_data = load_uv_mesh(props.get("filename"))
-            base, grid = None, _mesh_level(mesh_data, props, edge_length)
+            base = None
+            grid = None if self.dicing else _mesh_level(mesh_data, props, edge_length)
         else:
             base = surfaces.make_base(
                 base_name, **{k: float(props.get(k)) for k in BASE_PARAMS.get(base_name, ())
                               if k in props})
-            mesh_data, grid = None, tessellate.grid_resolution(base, resolution, edge_length)
-        start = time.perf_counter()
-        t = _build(base, mesh_data, grid, height, scale, midlevel)
-        super().__init__(props.id() or "displaced", t.vertex_count, t.face_count, props,
-                         True, True)
+            mesh_data = None
+            grid = None if self.dicing else tessellate.grid_resolution(base, resolution, edge_length)
         self.base, self.mesh_data, self.grid = base, mesh_data, grid
         self.height_texture, self.to_world = height, to_world
+        self.to_world_np = np.array(to_world.matrix, dtype=np.float64)
         self.scale, self.midlevel = mi.Float(scale), mi.Float(midlevel)
-        self._upload(t, start)
+        if self.dicing:
+            self.dicing_rate, self.offscreen_dicing_scale = mi.Float(rate), mi.Float(off)
+            self._cache = {}
+            self._weld = None if mesh_data is None else tessellate.weld_classes(mesh_data[0])
+            self._height_range = _height_range(height)
+        start = time.perf_counter()
+        t, stats = self._build(props.id() or "displaced")
+        super().__init__(props.id() or "displaced", t.vertex_count, t.face_count, props,
+                         True, True)
+        self._upload(t, start, stats)
+        if self.dicing:
+            self._cache["key"] = self._dice_key()
 
-    def _upload(self, t: tessellate.Tessellation, start: float) -> None:
+    # -- building ------------------------------------------------------------------------
+    def _build(self, name: str | None = None):
+        """(Tessellation, stats) for the current parameters (uniform or diced).
+
+        ``scale`` and ``midlevel`` enter the kernels as the traversed ``mi.Float``s, so a
+        gradient enabled on them (or on the height texture's data) reaches the vertices."""
+        if not self.dicing:
+            return _build(self.base, self.mesh_data, self.grid, self.height_texture, self.scale,
+                          self.midlevel), {"mode": "uniform"}
+        return self._dice(name or self.id())
+
+    def _dice(self, name: str):
+        """Staged dicing: edge rates -> topology (kept if no rate moved) -> vertices."""
+        owner = f"displaced {name!r}"
+        scale, midlevel = self.scale, self.midlevel
+        rate, off = float(self.dicing_rate[0]), float(self.offscreen_dicing_scale[0])
+        dicing.check_rates(rate, off)
+        times, rebuilt, warn = {}, [], []
+        clock = time.perf_counter()
+        views = [dicing.sensor_view(s) for s in self.sensors]
+        lo, hi = self._height_range
+        scale_f, midlevel_f = float(dr.detach(scale)[0]), float(dr.detach(midlevel)[0])
+        bound = abs(scale_f) * max(abs(hi - midlevel_f), abs(lo - midlevel_f)) * dicing.linear_scale(
+            self.to_world_np)
+        if not views:
+            warn.append(f"{owner}: dicing_rate needs a sensor and none is referenced "
+                        "(<ref id=\"...\"/> in the shape); diced coarsely until "
+                        "mi_displace.core.dicing.redice(scene) gives it the scene's sensors")
+            views = None
+        c = self._cache
+        if self.base is not None:
+            if views is None:
+                grid = c.get("grid", (16, 8))
+            else:
+                grid = dicing.parametric_grid(self.base, self.to_world_np, views, bound, rate, off)
+                old = c.get("grid")
+                # keep the patch grid unless the finest need moved by more than 2x
+                if old is not None and all(0.5 <= g / o <= 2 for g, o in zip(grid, old)):
+                    grid = old
+            edges = (dicing.parametric_edge_segments(self.base, self.to_world_np, grid, views,
+                                                     bound, rate, off) if views else
+                     _unit_edges(grid))
+            same = c.get("grid") == grid and "edges" in c and all(
+                np.array_equal(edges[k], c["edges"][k]) for k in edges)
+        else:
+            pos, _, _, faces = self.mesh_data
+            if views:
+                seg, side = dicing.mesh_edge_segments(pos, faces, self._weld, self.to_world_np,
+                                                      views, bound, rate, off)
+            else:
+                _, side = dicing.mesh_edges(faces, self._weld)
+                seg = np.ones(int(side.max()) + 1, np.int64)
+            edges, grid = {"seg": seg, "side": side}, None
+            same = "edges" in c and np.array_equal(seg, c["edges"]["seg"])
+        times["rates_s"] = time.perf_counter() - clock
+        clock = time.perf_counter()
+        if not same:
+            if self.base is not None:
+                c["topology"] = dicing.dice_parametric(self.base, grid, edges, rate, owner)
+            else:
+                c["topology"] = dicing.dice_mesh(self.mesh_data[3], self._weld, edges["seg"],
+                                                 edges["side"], rate, owner)
+            c["grid"], c["edges"] = grid, edges
+            rebuilt.append("topology")
+        times["topology_s"] = time.perf_counter() - clock
+        clock = time.perf_counter()
+        height = None if self.height_texture is None else height_function(self.height_texture, 1e-4)
+        topo = c["topology"]
+        if self.base is not None:
+            t = dicing.displace_diced_parametric(self.base, topo, height, scale, midlevel)
+            segs = np.concatenate([edges[k].ravel() for k in ("h", "v")])
+            patches = grid[0] * grid[1]
+        else:
+            pos, nrm, uvs, faces = self.mesh_data
+            t = tessellate.displace_mesh_vertices(pos, nrm, uvs, faces, topo.src, topo.bary,
+                                                  topo.groups, topo.faces, height, scale, midlevel)
+            segs, patches = edges["seg"], len(faces)
+        rebuilt.append("vertices")
+        times["displace_s"] = time.perf_counter() - clock
+        stats = {"mode": "dicing", "dicing_rate": rate, "offscreen_dicing_scale": off,
+                 "sensors": len(self.sensors), "bound": bound, "patches": patches,
+                 "patch_grid": list(grid) if grid else None,
+                 "edge_segments_min": int(segs.min()), "edge_segments_max": int(segs.max()),
+                 "rebuilt": rebuilt, **times, "warnings": warn}
+        return t, stats
+
+    def _upload(self, t: tessellate.Tessellation, start: float, stats: dict) -> None:
         """Write the tessellation into the mesh buffers (object -> world) and check it."""
         to_world = mi.Transform4f(self.to_world)
         positions = to_world @ t.positions
@@ -127,26 +271,137 @@ class Displaced(mi.Mesh):
             raise ValueError(f"displaced: tessellation of {self.id()!r} produced NaN/Inf "
                              "(check the height texture and 'scale')")
         v, f = t.vertex_count, t.face_count
-        self.build_stats = {"tessellate_s": time.perf_counter() - start,
-                            "vertices": v, "faces": f, "bytes": v * 8 * 4 + f * 3 * 4}
+        tessellate_s = time.perf_counter() - start
+        check = (crossing_check(t, thickness=self.base.thickness()) if self.base is not None
+                 else crossing_check(t, base_mesh=(self.mesh_data[0], self.mesh_data[3],
+                                                   self.mesh_data[2]),
+                                     other_side=self._signed_displacement()))
+        messages = list(stats.pop("warnings", []))
+        message = crossing_warning(f"displaced {self.id() or '(no id)'!r}", check)
+        if message:
+            messages.append(message)
+        for m in messages:
+            warnings.warn(m, stacklevel=2)
+        self.build_stats = {**stats, "tessellate_s": tessellate_s, "vertices": v, "faces": f,
+                            "bytes": v * 8 * 4 + f * 3 * 4,
+                            "crossing_vertices": check["crossing_vertices"],
+                            "warnings": messages}
+
+    def _signed_displacement(self):
+        """callable(uv) -> scale (h(uv) - midlevel), or None without a height."""
+        if self.height_texture is None:
+            return None
+        height = height_function(self.height_texture, 1e-3)
+        return lambda uv: self.scale * (height(uv)[0] - self.midlevel)
+
+    def redice_for(self, sensors) -> bool:
+        """Dice for ``sensors`` (the scene's) unless the shape references its own; True if
+        anything was rebuilt.  Called by :func:`mi_displace.core.dicing.redice`."""
+        if not self.dicing:
+            return False
+        if sensors is not None and not self._own_sensors():
+            self.sensors = list(sensors)
+            self._scene_sensors = True
+        return self._rebuild_if_needed()
+
+    def _own_sensors(self) -> bool:
+        return bool(self.sensors) and not getattr(self, "_scene_sensors", False)
+
+    def _dice_key(self) -> tuple:
+        """Everything the diced mesh depends on (sensor states and the four parameters);
+        a parameter with a gradient enabled always rebuilds (its graph must be fresh)."""
+        grad = dr.grad_enabled(self.scale) or dr.grad_enabled(self.midlevel)
+        return ([dicing.sensor_view(s).key() for s in self.sensors],
+                float(dr.detach(self.scale)[0]), float(dr.detach(self.midlevel)[0]),
+                float(self.dicing_rate[0]), float(self.offscreen_dicing_scale[0]),
+                object() if grad else None)
+
+    def _rebuild_if_needed(self) -> bool:
+        key = self._dice_key()
+        if key == self._cache.get("key"):
+            return False
+        start = time.perf_counter()
+        t, stats = self._build()
+        self._upload(t, start, stats)
+        self._cache["key"] = key
+        return True
 
     def traverse(self, cb):
         super().traverse(cb)
-        cb.put("scale", self.scale, mi.ParamFlags.NonDifferentiable)
-        cb.put("midlevel", self.midlevel, mi.ParamFlags.NonDifferentiable)
+        # differentiable: the vertices are recomputed from them with the AD graph attached
+        cb.put("scale", self.scale, mi.ParamFlags.Differentiable)
+        cb.put("midlevel", self.midlevel, mi.ParamFlags.Differentiable)
+        if self.height_texture is not None:  # its edits re-displace (never stale)
+            cb.put("height", self.height_texture, mi.ParamFlags.Differentiable)
+        if self.dicing:
+            cb.put("dicing_rate", self.dicing_rate, mi.ParamFlags.NonDifferentiable)
+            cb.put("offscreen_dicing_scale", self.offscreen_dicing_scale,
+                   mi.ParamFlags.NonDifferentiable)
 
     def parameters_changed(self, keys=[]):
-        if "scale" in keys or "midlevel" in keys:
-            start = time.perf_counter()
-            self._upload(_build(self.base, self.mesh_data, self.grid, self.height_texture,
-                                self.scale[0], self.midlevel[0]), start)
+        own = {"scale", "midlevel", "dicing_rate", "offscreen_dicing_scale"}
+        texture = any(k == "height" or k.startswith("height.") for k in keys)
+        if own & set(keys) or texture:
+            self._refuse_gradients_that_cannot_flow()
+            for key in ("scale", "midlevel"):
+                if not math.isfinite(float(dr.detach(getattr(self, key))[0])):
+                    raise ValueError(f"displaced: '{key}' must be finite")
+            if texture:
+                check_texture_finite(self.height_texture)
+            if self.dicing:
+                if texture:  # the height range (hence the bound) may have moved
+                    self._height_range = _height_range(self.height_texture)
+                    self._cache.pop("key", None)
+                self._rebuild_if_needed()
+            else:
+                start = time.perf_counter()
+                t, stats = self._build()
+                self._upload(t, start, stats)
         else:
             super().parameters_changed(keys)
+
+    def _refuse_gradients_that_cannot_flow(self) -> None:
+        """ValueError naming a parameter whose gradient would silently stay zero."""
+        names = [k for k in ("dicing_rate", "offscreen_dicing_scale")
+                 if self.dicing and dr.grad_enabled(getattr(self, k))]
+        if self.height_texture is not None:
+            params = mi.traverse(self.height_texture)
+            names += [f"height.{k}" for k in params.keys()
+                      if params.flags(k) & mi.ParamFlags.NonDifferentiable
+                      and dr.is_array_v(params[k]) and dr.grad_enabled(params[k])]
+        if names:
+            raise ValueError(f"displaced {self.id()!r}: a gradient was enabled on "
+                             f"{', '.join(map(repr, names))}, which the tessellation cannot "
+                             "differentiate (it would stay exactly zero); differentiable: "
+                             "'scale', 'midlevel' and the height texture's data")
 
     def to_string(self):
         s = self.build_stats
         return (f"Displaced[base={self.base.name if self.base else 'mesh'}, "
                 f"vertices={s.get('vertices')}, faces={s.get('faces')}]")
+
+
+def _height_range(texture) -> tuple[float, float]:
+    """(min, max) of a height texture: probed on a 256^2 uv grid, max widened by ``max()``."""
+    if texture is None:
+        return 0.0, 0.0
+    g = (np.arange(256) + 0.5) / 256
+    u, v = np.meshgrid(g, g)
+    h, _ = height_function(texture, 1e-3)(mi.Point2f(mi.Float(u.ravel()), mi.Float(v.ravel())))
+    h = np.asarray(h)
+    hi = float(h.max())
+    try:
+        hi = max(hi, float(np.asarray(texture.max()).max()))
+    except Exception:  # textures without a max() keep the probed value
+        pass
+    return float(h.min()), hi
+
+
+def _unit_edges(grid) -> dict:
+    """Every patch edge and mid-line of a (nu, nv) patch grid with one segment."""
+    nu, nv = grid
+    return {"h": np.ones((nv + 1, nu), np.int64), "v": np.ones((nv, nu + 1), np.int64),
+            "mid_u": np.ones((nv, nu), np.int64), "mid_v": np.ones((nv, nu), np.int64)}
 
 
 def register():

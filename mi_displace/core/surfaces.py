@@ -103,6 +103,10 @@ class BaseSurface:
         """(min, max) principal curvature over the surface [1 / object units]."""
         raise NotImplementedError
 
+    def thickness(self) -> float:
+        """Shortest distance along -n from the surface to its other side [object units]."""
+        return float("inf")
+
 
 class Plane(BaseSurface):
     """The square [-1, 1]^2 at z = 0 (Mitsuba's ``rectangle``), normal +z.
@@ -162,6 +166,9 @@ class Sphere(BaseSurface):
     def curvature_bounds(self):
         return 1 / self.radius, 1 / self.radius
 
+    def thickness(self):
+        return 2 * self.radius
+
 
 class Cylinder(BaseSurface):
     """Open cylinder of ``radius`` r about the z axis from z = 0 to z = ``length``.
@@ -194,6 +201,9 @@ class Cylinder(BaseSurface):
 
     def curvature_bounds(self):
         return 0.0, 1 / self.radius
+
+    def thickness(self):
+        return 2 * self.radius
 
 
 class Torus(BaseSurface):
@@ -239,6 +249,9 @@ class Torus(BaseSurface):
     def curvature_bounds(self):
         R, r = self.major_radius, self.minor_radius
         return -1 / (R - r), 1 / r
+
+    def thickness(self):
+        return 2 * self.minor_radius
 
 
 BASES = {"plane": Plane, "sphere": Sphere, "cylinder": Cylinder, "torus": Torus}

@@ -6,7 +6,10 @@ Two kinds of base:
   [0, 1]^2 with analytic shading normals
   N = P_u x P_v,  P_u = S_u + scale ((h - m) n_u + h_u n)  (likewise for v);
 * polygonal (a triangle mesh with UVs): every triangle split into level^2 triangles on a
-  barycentric grid, vertices shared across edges; normals from the displaced faces.
+  barycentric grid, vertices shared across edges, displaced along the *interpolated* (smooth)
+  vertex normal n; shading normals are those of the displaced smooth surface,
+  N = P_u x P_v with P_u = T_u + scale ((h - m) n_u + h_u n), where T_u is the interpolated
+  tangent dS/du projected onto the plane of n (so zero height shades like the smooth base).
 
 Everything per vertex / face is Dr.Jit; the returned buffers go straight into a mi.Mesh.
 Closed bases stay watertight: seam vertices are evaluated at the wrapped parameter and the
@@ -46,12 +49,19 @@ class Tessellation:
         normals: mi.Vector3f, V unit shading normals
         texcoords: mi.Point2f, V (u, v)
         faces: mi.Vector3u, F triangles (counter-clockwise seen from outside)
+        base_positions, base_normals: the undisplaced point S and unit normal n of each
+            vertex (mi.Point3f / mi.Vector3f, V), or None where not kept
+        displacement: mi.Float, V signed displacement scale (h - m) along n [object units],
+            or None (zero height)
     """
 
     positions: mi.Point3f
     normals: mi.Vector3f
     texcoords: mi.Point2f
     faces: mi.Vector3u
+    base_positions: mi.Point3f | None = None
+    base_normals: mi.Vector3f | None = None
+    displacement: mi.Float | None = None
 
     @property
     def vertex_count(self) -> int:
@@ -130,29 +140,56 @@ def displace_parametric(base: BaseSurface, height, scale: float, midlevel: float
     # Evaluate at the wrapped parameter so seam twins are bit-identical.
     u = mi.Float(iu % nu) / nu if base.periodic_u else u_tex
     v = mi.Float(iv % nv) / nv if base.periodic_v else v_tex
-    s = base.sample(u, v)
-    p, n = mi.Point3f(s.p), mi.Vector3f(s.n)
-    p_u, p_v = s.dp_du, s.dp_dv
-    if height is not None:
-        h, grad = height(mi.Point2f(u, v))
-        h = h - midlevel
-        if base.poles:
-            h = _pole_average(h, iv, nu, nv)
-            grad = dr.select((iv == 0) | (iv == nv), 0.0, grad)
-        p = p + scale * h * n
-        p_u = p_u + scale * (h * s.dn_du + grad.x * n)
-        p_v = p_v + scale * (h * s.dn_dv + grad.y * n)
+
+    def poles(h, grad):
+        return (_pole_average(h, iv, nu, nv),
+                dr.select((iv == 0) | (iv == nv), 0.0, grad)) if base.poles else (h, grad)
+
+    s, p, p_u, p_v, disp = displaced_partials(base, height, scale, midlevel, u, v, poles)
     if base.poles:  # collapse each pole row onto one point
         first = dr.select(iv == 0, 0, dr.select(iv == nv, nv * (nu + 1), i))
         p = gather(mi.Point3f, p, first)
+    flip = _winding_is_inward(base)
+    return Tessellation(positions=p, normals=partials_normal(s, p_u, p_v),
+                        texcoords=mi.Point2f(u_tex, v_tex),
+                        faces=grid_faces(nu, nv, base.poles, flip), base_positions=mi.Point3f(s.p),
+                        base_normals=mi.Vector3f(s.n), displacement=disp)
+
+
+def displaced_partials(base: BaseSurface, height, scale: float, midlevel: float,
+                       u: mi.Float, v: mi.Float, adjust=None):
+    """P = S + scale (h - m) n and its partials P_u, P_v at (u, v) (Dr.Jit, per point).
+
+    P_u = S_u + scale ((h - m) n_u + h_u n) (likewise v).  ``adjust(h - m, grad)`` may
+    replace the height and gradient first (pole rows, seam twins).
+
+    Returns:
+        (s, p, p_u, p_v, disp): the base's :class:`SurfaceSample`, mi.Point3f, two
+        mi.Vector3f and the signed displacement mi.Float (``None`` without a height).
+    """
+    s = base.sample(u, v)
+    p, n = mi.Point3f(s.p), mi.Vector3f(s.n)
+    p_u, p_v, disp = s.dp_du, s.dp_dv, None
+    if height is not None:
+        h, grad = height(mi.Point2f(u, v))
+        h = h - midlevel
+        if adjust is not None:
+            h, grad = adjust(h, grad)
+        disp = scale * h
+        p = p + disp * n
+        p_u = p_u + scale * (h * s.dn_du + grad.x * n)
+        p_v = p_v + scale * (h * s.dn_dv + grad.y * n)
+    return s, p, p_u, p_v, disp
+
+
+def partials_normal(s, p_u: mi.Vector3f, p_v: mi.Vector3f) -> mi.Vector3f:
+    """Unit normal P_u x P_v oriented like the base's n; n itself where it degenerates."""
+    n = mi.Vector3f(s.n)
     normal = dr.cross(p_u, p_v)
     orientation = dr.sign(dr.dot(dr.cross(s.dp_du, s.dp_dv), n))
     normal *= orientation
     degenerate = dr.squared_norm(normal) <= 1e-12 * dr.squared_norm(p_u) * dr.squared_norm(p_v)
-    normal = dr.normalize(dr.select(degenerate, n, normal))
-    flip = _winding_is_inward(base)
-    return Tessellation(positions=p, normals=normal, texcoords=mi.Point2f(u_tex, v_tex),
-                        faces=grid_faces(nu, nv, base.poles, flip))
+    return dr.normalize(dr.select(degenerate, n, normal))
 
 
 def _pole_average(h: mi.Float, iv: mi.UInt32, nu: int, nv: int) -> mi.Float:
@@ -238,13 +275,81 @@ def subdivision_topology(faces: np.ndarray, weld: np.ndarray, level: int):
             group.astype(np.uint32), new_faces.astype(np.uint32))
 
 
+def vertex_frames(positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray,
+                  faces: np.ndarray):
+    """Per-vertex tangents dS/du, dS/dv and normal derivatives dn/du, dn/dv (NumPy, one-off).
+
+    Each triangle's constant Jacobians (from its positions, vertex normals and UVs) are
+    averaged over the triangles around a vertex, weighted by area; the normal derivatives
+    are projected onto the vertex's tangent plane (derivatives of the *unit* normal).
+    Triangles with a degenerate UV map contribute nothing.
+
+    Returns:
+        (s_u, s_v, n_u, n_v): four (V, 3) float32 arrays [object units per unit uv; per unit uv].
+    """
+    p = np.asarray(positions, np.float64)
+    nrm = np.asarray(normals, np.float64)
+    uv = np.asarray(uvs, np.float64)
+    f = np.asarray(faces, np.int64)
+    e1, e2 = p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]]
+    m1, m2 = nrm[f[:, 1]] - nrm[f[:, 0]], nrm[f[:, 2]] - nrm[f[:, 0]]
+    d1, d2 = uv[f[:, 1]] - uv[f[:, 0]], uv[f[:, 2]] - uv[f[:, 0]]
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    ok = np.abs(det) > 1e-12
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
+    # [X_u X_v] = [X_1 X_2] [d1 d2]^-1 for X = S (edges e) and the interpolated normal (m)
+    ju = lambda a, b: (a * d2[:, 1:2] - b * d1[:, 1:2]) * inv
+    jv = lambda a, b: (b * d1[:, 0:1] - a * d2[:, 0:1]) * inv
+    area = (0.5 * np.linalg.norm(np.cross(e1, e2), axis=1) * ok)[:, None]
+    out = []
+    for per_face in (ju(e1, e2), jv(e1, e2), ju(m1, m2), jv(m1, m2)):
+        acc = np.zeros_like(p)
+        for k in range(3):
+            np.add.at(acc, f[:, k], per_face * area)
+        out.append(acc)
+    weight = np.zeros(len(p))
+    for k in range(3):
+        np.add.at(weight, f[:, k], area[:, 0])
+    weight = np.where(weight > 0, weight, 1.0)[:, None]
+    s_u, s_v, n_u, n_v = (a / weight for a in out)
+    unit = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
+    n_u -= np.sum(n_u * unit, 1, keepdims=True) * unit
+    n_v -= np.sum(n_v * unit, 1, keepdims=True) * unit
+    return tuple(np.ascontiguousarray(a, np.float32) for a in (s_u, s_v, n_u, n_v))
+
+
+def smooth_displaced_normals(n, s_u, s_v, n_u, n_v, disp, grad, scale: float):
+    """Normal of the displaced smooth surface in the interpolated frame (Dr.Jit, per vertex).
+
+    N = P_u x P_v with P_u = T_u + disp n_u + scale h_u n, T_u = s_u - (s_u . n) n (likewise
+    for v), oriented along n; where it degenerates, n.
+
+    Args:
+        n: unit interpolated normal; s_u, s_v, n_u, n_v: interpolated frame (mi.Vector3f);
+        disp: scale (h - m) (mi.Float) or None; grad: dh/duv (mi.Vector2f) or None.
+    """
+    t_u = s_u - dr.dot(s_u, n) * n
+    t_v = s_v - dr.dot(s_v, n) * n
+    orientation = dr.sign(dr.dot(dr.cross(t_u, t_v), n))
+    p_u, p_v = t_u, t_v
+    if disp is not None:
+        p_u = p_u + disp * (n_u - dr.dot(n_u, n) * n) + scale * grad.x * n
+        p_v = p_v + disp * (n_v - dr.dot(n_v, n) * n) + scale * grad.y * n
+    normal = dr.cross(p_u, p_v) * orientation
+    degenerate = (dr.squared_norm(normal) <= 1e-12 * dr.squared_norm(p_u) * dr.squared_norm(p_v)) | (
+        orientation == 0)
+    return dr.normalize(dr.select(degenerate, n, normal))
+
+
 def displace_mesh(positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray,
                   faces: np.ndarray, height, scale: float, midlevel: float,
                   level: int) -> Tessellation:
     """Subdivide a triangle mesh with UVs and displace it along its interpolated normals.
 
-    The displacement of UV-seam twins is averaged so the surface stays closed; shading
-    normals are the area-weighted normals of the displaced faces around each position.
+    The displacement of UV-seam twins is averaged so the surface stays closed.  Shading
+    normals are those of the displaced *smooth* surface (:func:`smooth_displaced_normals`
+    over the interpolated frame of :func:`vertex_frames`), averaged over seam twins; at zero
+    height they are the interpolated base normals, as a smooth-shaded base mesh has.
 
     Args:
         positions: (V, 3) float vertex positions [object units].
@@ -255,34 +360,76 @@ def displace_mesh(positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray,
             :func:`displace_parametric`.
         level: subdivision level (each edge split into ``level`` segments).
     """
-    _, weld = np.unique(np.asarray(positions, np.float32), axis=0, return_inverse=True)
-    src, bary, group, new_faces = subdivision_topology(faces, weld.ravel(), level)
-    idx = [mi.UInt32(src[:, k]) for k in range(3)]
-    wts = [mi.Float(bary[:, k]) for k in range(3)]
+    src, bary, group, new_faces = subdivision_topology(faces, weld_classes(positions), level)
+    return displace_mesh_vertices(positions, normals, uvs, faces, src, bary, group, new_faces,
+                                  height, scale, midlevel)
 
-    def interp(cls, data):
+
+def weld_classes(positions: np.ndarray) -> np.ndarray:
+    """(V,) int position class of each vertex (equal float32 positions share one)."""
+    _, weld = np.unique(np.asarray(positions, np.float32), axis=0, return_inverse=True)
+    return weld.ravel()
+
+
+def displace_mesh_vertices(positions, normals, uvs, faces, src: np.ndarray, bary: np.ndarray,
+                           group: np.ndarray, new_faces: np.ndarray, height, scale: float,
+                           midlevel: float) -> Tessellation:
+    """Displace the vertices of any refinement of a base mesh (:func:`displace_mesh`'s kernel).
+
+    Args:
+        positions, normals, uvs, faces: the base mesh (as :func:`displace_mesh`).
+        src: (N, 3) base vertex ids and ``bary``: (N, 3) weights of each new vertex.
+        group: (N,) position class: vertices of one class get one displacement and one
+            normal (UV-seam twins stay on one point).
+        new_faces: (F', 3) triangles over the new vertices.
+        height, scale, midlevel: as :func:`displace_parametric`.
+    """
+    idx = [mi.UInt32(np.ascontiguousarray(src[:, k], np.uint32)) for k in range(3)]
+    wts = [mi.Float(np.ascontiguousarray(bary[:, k], np.float32)) for k in range(3)]
+
+    def interp(data):
+        cls = mi.Vector3f if data.shape[1] == 3 else mi.Vector2f
         arr = cls(*[mi.Float(np.ascontiguousarray(data[:, k], np.float32))
                     for k in range(data.shape[1])])
         return sum((gather(cls, arr, idx[k]) * wts[k] for k in range(1, 3)),
                    gather(cls, arr, idx[0]) * wts[0])
 
-    p = mi.Point3f(interp(mi.Vector3f, positions))
-    n = dr.normalize(interp(mi.Vector3f, normals))
-    uv = mi.Point2f(interp(mi.Vector2f, uvs))
-    groups = mi.UInt32(group)
+    base_p = mi.Point3f(interp(positions))
+    uv = mi.Point2f(interp(uvs))
+    s_u, s_v, n_u, n_v = (interp(a) for a in vertex_frames(positions, normals, uvs, faces))
+    # between vertex normals that cancel (a crease whose sides share vertices) fall back to
+    # the tangent frame's normal, else +z: never a NaN
+    n_raw, frame = interp(normals), dr.cross(s_u, s_v)
+    n = dr.normalize(dr.select(dr.squared_norm(n_raw) > 1e-12, n_raw, dr.select(
+        dr.squared_norm(frame) > 0, frame, mi.Vector3f(0, 0, 1))))
+    groups = mi.UInt32(np.ascontiguousarray(group, np.uint32))
     n_groups = int(group.max()) + 1
+    p, disp, grad = base_p, None, None
     if height is not None:
-        h, _ = height(uv)
-        d = scale * (h - midlevel) * n
+        h, grad = height(uv)
         # UV-seam twins: one displacement per position class (eq. of a welded vertex)
-        total = dr.zeros(mi.Vector3f, n_groups)
-        count = dr.zeros(mi.Float, n_groups)
-        scatter_add(total, d, groups)
-        dr.scatter_add(count, 1.0, groups)
-        p = p + gather(mi.Vector3f, total, groups) / dr.gather(mi.Float, count, groups)
-    f = mi.Vector3u(*[mi.UInt32(new_faces[:, k]) for k in range(3)])
-    return Tessellation(positions=p, normals=face_weighted_normals(p, f, groups, n_groups, n),
-                        texcoords=uv, faces=f)
+        disp = group_mean(scale * (h - midlevel), groups, n_groups)
+        p = base_p + disp * n
+    normal = smooth_displaced_normals(n, s_u, s_v, n_u, n_v, disp, grad, scale)
+    normal = dr.normalize(group_mean(normal, groups, n_groups))
+    f = mi.Vector3u(*[mi.UInt32(np.ascontiguousarray(new_faces[:, k], np.uint32))
+                      for k in range(3)])
+    return Tessellation(positions=p, normals=normal, texcoords=uv, faces=f,
+                        base_positions=base_p, base_normals=n, displacement=disp)
+
+
+def group_mean(value, groups: mi.UInt32, n_groups: int):
+    """Mean of ``value`` (mi.Float or a 3-vector) over the vertices of each group, per vertex."""
+    count = dr.zeros(mi.Float, n_groups)
+    dr.scatter_add(count, 1.0, groups)
+    count = dr.gather(mi.Float, count, groups)
+    if isinstance(value, mi.Float):
+        total = dr.zeros(mi.Float, n_groups)
+        dr.scatter_add(total, value, groups)
+        return dr.gather(mi.Float, total, groups) / count
+    total = dr.zeros(mi.Vector3f, n_groups)
+    scatter_add(total, value, groups)
+    return gather(mi.Vector3f, total, groups) / count
 
 
 def face_weighted_normals(p: mi.Point3f, faces: mi.Vector3u, groups: mi.UInt32,

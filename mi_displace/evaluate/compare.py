@@ -51,7 +51,8 @@ of (build + render); ``speedup = reference_time_s / approx_time_warm_s``, both e
 Outputs in ``out_dir``: ``reference.exr``, ``approximation.exr`` (linear float32),
 ``panel.png`` (reference | approximation | FLIP heat map) and ``metrics.json``
 (:data:`METRIC_KEYS` and more; a non-finite float such as the PSNR of identical images is
-written as ``null``).
+written as ``null``).  ``warnings`` lists every ``build_stats["warnings"]`` entry of either
+side's shapes (for instance a displacement deeper than a thin shell's wall).
 """
 from __future__ import annotations
 
@@ -88,7 +89,7 @@ METRIC_KEYS = (
     "reference_build_cold_s", "reference_render_cold_s",
     "approx_time_cold_s", "approx_build_cold_s", "approx_render_cold_s",
     "approx_time_warm_s", "approx_build_s", "approx_render_warm_s", "warm_repeats",
-    "speedup", "build_stats", "mitsuba_version", "drjit_version",
+    "speedup", "build_stats", "warnings", "mitsuba_version", "drjit_version",
 )
 
 
@@ -427,6 +428,10 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
         "warm_repeats": int(warm_repeats),
         "speedup": reference_time / measured["time_warm_s"],
         "build_stats": {"reference": ref["build_stats"], "approximation": measured["build_stats"]},
+        # what the plugins warned about while building (e.g. displacement through a thin shell)
+        "warnings": [f"{side}: {w}" for side, shapes in
+                     (("reference", ref["build_stats"]), ("approximation", measured["build_stats"]))
+                     for shape in shapes for w in shape.get("warnings", [])],
         "mitsuba_version": mi.__version__,
         "drjit_version": dr.__version__,
     }

@@ -26,6 +26,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.core.dicing import redice
 from mi_displace.core.progress import bar as progress_bar
 
 #: Largest number of samples (pixels x spp) rendered in one ``mi.render`` call; larger
@@ -107,6 +108,27 @@ def shape_stats(scene) -> list[dict]:
     return stats
 
 
+def explain(scene) -> list[dict]:
+    """What every plugin of ``scene`` built and why (``mi-displace render --explain``).
+
+    The protocol: any shape, or BSDF attached to a shape, with a ``build_stats`` dict
+    attribute is reported, as ``{"id", "kind" ("shape"/"bsdf"), "type", **build_stats}``
+    (a BSDF shared by several shapes once).  A plugin opts in by setting the attribute.
+    """
+    rows, seen = [], set()
+    for index, shape in enumerate(scene.shapes()):
+        objects = [("shape", shape, shape.id() or f"shape_{index}")]
+        bsdf = shape.bsdf()
+        if bsdf is not None:
+            objects.append(("bsdf", bsdf, bsdf.id() or f"bsdf_of_{objects[0][2]}"))
+        for kind, obj, name in objects:
+            stats = getattr(obj, "build_stats", None)
+            if isinstance(stats, dict) and id(obj) not in seen:
+                seen.add(id(obj))
+                rows.append({"id": name, "kind": kind, "type": type(obj).__name__, **stats})
+    return rows
+
+
 def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
     """Load a scene XML file with ``$name`` parameters and time it.
 
@@ -137,6 +159,8 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
     SENSOR_FIT.pending = True      # ddm "auto" waits for the sensors (fitted below)
     try:
         scene = mi.load_file(str(path), **params)
+        # shapes that dice for the scene's sensors but reference none of their own
+        redice(scene)
     except RuntimeError as e:
         raise _translate_load_error(path, e) from None
     finally:

@@ -105,3 +105,111 @@ def test_extreme_scales_and_far_offsets(variant, size):
     # float32 at 1e4 radii from the origin keeps ~1e-3 relative precision of the radius
     assert r.min() > 1 - 2e-3 and r.max() < 1.1 + 2e-3
     assert r.max() - r.min() > 0.09  # the ripples are there
+
+
+def write_obj(path, pos, nrm, uvs, faces):
+    """An OBJ with positions, UVs and vertex normals (one index per corner for all three)."""
+    lines = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in pos]
+    lines += [f"vt {u:.9g} {v:.9g}" for u, v in uvs]
+    lines += [f"vn {x:.9g} {y:.9g} {z:.9g}" for x, y, z in nrm]
+    lines += ["f " + " ".join(f"{i + 1}/{i + 1}/{i + 1}" for i in f) for f in faces]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_mesh_reference_at_zero_height_renders_like_the_smooth_base(variant, tmp_path):
+    """Issue 12.1: the `displaced` reference on a 12-gon cylinder at zero height matches the
+    smooth-shaded base mesh (Mitsuba's own vertex-normal interpolation), not the facets."""
+    from tests.core.test_tessellate import cylinder_mesh
+
+    write_obj(tmp_path / "cyl.obj", *cylinder_mesh(12, 2))
+
+    def render(shape):
+        scene = mi.load_dict({
+            "type": "scene", "integrator": {"type": "direct"},
+            "sensor": {"type": "perspective", "fov": 40, "to_world": mi.ScalarTransform4f().look_at(
+                origin=[0, -4.5, 1.5], target=[0, 0, 1], up=[0, 0, 1]),
+                "film": {"type": "hdrfilm", "width": 64, "height": 64, "rfilter": {"type": "box"}},
+                "sampler": {"type": "independent", "sample_count": 4}},
+            "light": {"type": "point", "position": [2, -3, 2], "intensity": {"type": "rgb", "value": 20}},
+            "shape": shape})
+        img = np.asarray(mi.render(scene, seed=1))
+        assert np.all(np.isfinite(img))
+        return img
+
+    smooth = render({"type": "obj", "filename": str(tmp_path / "cyl.obj")})
+    faceted = render({"type": "obj", "filename": str(tmp_path / "cyl.obj"), "face_normals": True})
+    ours = render({"type": "displaced", "filename": str(tmp_path / "cyl.obj"), "subdivision": 4,
+                   "scale": 0.0, "height": {"type": "ripples"}})
+    lit = smooth.mean()
+    assert lit > 0.05
+    facet_error = np.abs(faceted - smooth).mean() / lit
+    error = np.abs(ours - smooth).mean() / lit
+    assert facet_error > 0.05           # the test sees faceting
+    assert error < 0.05 * facet_error, (error, facet_error)
+
+
+def test_thin_shell_warning_reaches_compare_metrics(variant, tmp_path):
+    """Issue 12.3: inward displacement of 0.03 through a 0.015 shell warns, naming the shape,
+    and `compare` lists the warning in metrics.json; 0.01 stays silent."""
+    import json
+
+    from mi_displace.evaluate.compare import compare
+    from tests.core.test_thickness import shell_mesh
+
+    write_obj(tmp_path / "shell.obj", *shell_mesh())
+    common = {"filename": str(tmp_path / "shell.obj"), "subdivision": 2, "midlevel": 1.0,
+              "height": {"type": "ripples"}}
+    with pytest.warns(UserWarning, match="displaced 'thin'.*thickness"):
+        deep = mi.load_dict({"type": "displaced", "id": "thin", "scale": 0.03, **common})
+    assert deep.build_stats["crossing_vertices"] > 0 and deep.build_stats["warnings"]
+    shallow = displaced(scale=0.004, **common)
+    assert shallow.build_stats["crossing_vertices"] == 0 and not shallow.build_stats["warnings"]
+
+    (tmp_path / "parts").mkdir()
+    for mode, depth in (("reference", 0.03), ("approximation", 0.0)):
+        (tmp_path / "parts" / f"shell_{mode}.xml").write_text(
+            f'<scene version="3.0.0"><shape type="displaced" id="thin">'
+            f'<string name="filename" value="shell.obj"/><integer name="subdivision" value="1"/>'
+            f'<float name="scale" value="{depth}"/><float name="midlevel" value="1"/>'
+            f'<texture type="ripples" name="height"/></shape></scene>')
+    (tmp_path / "shell.xml").write_text("""<scene version="3.0.0">
+        <default name="mode" value="reference"/><default name="integrator" value="path"/>
+        <default name="approximation_integrator" value="path"/>
+        <integrator type="$integrator"><integer name="max_depth" value="2"/></integrator>
+        <sensor type="perspective"><transform name="to_world">
+            <lookat origin="0, -4, 0" target="0, 0, 0" up="0, 0, 1"/></transform>
+            <sampler type="independent"><integer name="sample_count" value="2"/></sampler>
+            <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/></film>
+        </sensor><emitter type="constant"/>
+        <include filename="parts/shell_$mode.xml"/></scene>""")
+    compare(tmp_path / "shell.xml", tmp_path / "out", max_spp=8)
+    saved = json.loads((tmp_path / "out" / "metrics.json").read_text())
+    assert len(saved["warnings"]) == 1
+    assert saved["warnings"][0].startswith("reference: displaced 'thin'")
+
+
+def test_render_explain_prints_build_stats_per_shape(variant, tmp_path, capsys):
+    """`mi-displace render --explain`: every shape with build_stats, the dicing rate and faces;
+    a shape diced for the scene's sensor without a <ref> is diced by the loader."""
+    from mi_displace import cli
+
+    (tmp_path / "s.xml").write_text("""<scene version="3.0.0"><integrator type="direct"/>
+        <sensor type="perspective" id="cam"><float name="fov" value="40"/>
+            <transform name="to_world"><lookat origin="0, -4, 0" target="0, 0, 0" up="0, 0, 1"/></transform>
+            <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/></film>
+        </sensor>
+        <shape type="displaced" id="ball"><float name="dicing_rate" value="2"/>
+            <texture type="ripples" name="height"/><ref id="cam"/></shape>
+        <shape type="displaced" id="loose"><float name="dicing_rate" value="2"/>
+            <transform name="to_world"><translate x="3"/></transform></shape>
+        <shape type="sphere" id="plain"/></scene>""")
+    out = tmp_path / "img.exr"
+    with pytest.warns(UserWarning, match="'loose'.*needs a sensor"):
+        assert cli.main(["render", str(tmp_path / "s.xml"), "--explain", "--spp", "1",
+                         "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "shape 'ball' (Displaced):" in text and "shape 'loose' (Displaced):" in text
+    assert "'plain'" not in text
+    assert text.count("dicing_rate: 2") == 2 and "faces:" in text and "sensors: 1" in text
+    assert out.is_file()
+    assert cli.main(["render", str(tmp_path / "s.xml"), "--explain"]) == 0  # explain only
