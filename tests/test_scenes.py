@@ -40,6 +40,10 @@ BOUNDS = {
     "ddm_teapot_morph": (0.014, "docs/ddm.md, trade-off over map_resolution: FLIP 0.014 at 128, "
                                 "this scene's map_resolution"),
     "ddm_thorns_sphere": (0.048, "docs/ddm.md, Images: FLIP 0.048 at map_resolution 32"),
+    # dicing rates are in pixels of the film: at 64² a 1 px micro-edge is the 256² table's 4 px
+    "displaced_horizon": (0.0392, "docs/displaced.md, dicing sweep at 256²: displaced_horizon, "
+                                  "dicing 4 px FLIP 0.0392 against the 0.5 px reference"),
+    "displaced_thin_shell": (0.0193, "docs/displaced.md, thin shell: FLIP of bumpmap 0.0193"),
     "slicing_cup_depth": (0.118, "docs/slicing.md, compare: slicing_cup_depth FLIP 0.118"),
     "slicing_cup_hull": (0.107, "docs/slicing.md, compare: slicing_cup_hull FLIP 0.107"),
     "slicing_donut": (0.124, "docs/slicing.md, compare: slicing_donut FLIP 0.124"),
