@@ -47,6 +47,7 @@ class Horizon(MesostructureBSDF):
         start = time.perf_counter()
         self.used_tile = float(tile_size)
         heights = table.sample_heights(self.height, self.res, self.tiling)
+        self._check_periodic(heights)
         self.D = self.depth / self.used_tile
         self.lookup = HorizonLookup(horizon_table(heights, self.D, self.azimuths, self.max_distance))
         self.stats.update(build_time_s=time.perf_counter() - start, table_bytes=self.lookup.nbytes,

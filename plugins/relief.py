@@ -21,6 +21,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mi_displace.plugins.vdm import MesostructureBSDF, _number
+from mi_displace.vdm import table
 from mi_displace.vdm.frame import TiledHeight, TileFrame, shading_interaction
 from mi_displace.vdm.relief import march_shadow, march_view
 
@@ -42,6 +43,7 @@ class Relief(MesostructureBSDF):
 
     def _setup(self, tile_size, meshes):
         self.used_tile = float(tile_size)
+        self._check_periodic(table.sample_heights(self.height, 64, self.tiling))
         self.stats.update(tile_size=self.used_tile, table_bytes=0)
 
     def _prepare(self, si, active):

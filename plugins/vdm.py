@@ -16,6 +16,8 @@
             <integer name="svd_terms" value="8"/>   <!-- paper: 8 VDM + 4 MVM -->
             <integer name="mvm_terms" value="4"/>
             <boolean name="shadows" value="true"/>
+            <integer name="refine_steps" value="8"/>  <!-- T' refinement; 0 = the paper -->
+            <integer name="shadow_verify" value="3"/> <!-- shadow check; 0 = the paper -->
             <bsdf type="diffuse"/>                   <!-- the nested material -->
         </bsdf>
     </shape>
@@ -27,6 +29,7 @@ use on any shape (c_V = 0).  Algorithm: :mod:`mi_displace.vdm`.
 from __future__ import annotations
 
 import math
+import warnings
 
 import drjit as dr
 import mitsuba as mi
@@ -152,6 +155,14 @@ class MesostructureBSDF(mi.BSDF):
                    f"over mesh {mesh_info.get('name')!r} (UV scale mismatch): the table assumes "
                    f"one tile size ({tile:.4g}); expect stretched relief there")
 
+    def _check_periodic(self, heights) -> None:
+        """Warn (once) when one tile is not one period of the height texture."""
+        message = table.periodicity_warning(heights, self.PLUGIN, self.tiling)
+        if message and message != self.stats.get("periodicity_warning"):
+            self.stats["periodicity_warning"] = message
+            warnings.warn(message)
+            mi.Log(mi.LogLevel.Warn, message)
+
     def _require(self, ready: bool) -> None:
         if not ready:
             raise RuntimeError(
@@ -248,8 +259,11 @@ class VDM(MesostructureBSDF):
         self.svd_terms = _number(props, "svd_terms", 8, 1, build.K_STORED, True)
         self.mvm_terms = _number(props, "mvm_terms", 4, 1, build.K_STORED, True)
         self.shadows = bool(props.get("shadows", True))
-        self.shadow_bias = _number(props, "shadow_bias", 1.0, 0.0)
-        self.shadow_slack = _number(props, "shadow_slack", 1.0, 0.0)
+        self.shadow_bias = _number(props, "shadow_bias", 0.0, 0.0)
+        self.shadow_slack = _number(props, "shadow_slack", 0.0, 0.0)
+        self.shadow_verify = _number(props, "shadow_verify", 3, 0, 64, True)
+        self.refine_steps = _number(props, "refine_steps", 8, 0, 256, True)
+        self.refine_window = _number(props, "refine_window", 0.5, 0.0, 10.0)
         self.use_cache = bool(props.get("cache", True))
         self.curvature_percentile = _number(props, "curvature_percentile", 0.0, 0.0, 49.0)
         c_min, c_max = props.get("curvature_min", None), props.get("curvature_max", None)
@@ -304,11 +318,13 @@ class VDM(MesostructureBSDF):
                     f"({len(spec.curvatures())} curvature(s) x ({spec.n_theta} theta + 1) "
                     f"columns, at most {build.K_STORED}); lower it or raise 'theta'")
         heights = table.sample_heights(self.height, spec.res, self.tiling)
+        self._check_periodic(heights)
         self.data = build.build(heights, spec, use_cache=self.use_cache)
         lookup = cached_lookup(self.data, self.svd_terms, self.mvm_terms)
         self.steps = VDMSteps(lookup, self.height, spec.depth, tile_size, self.tiling,
                               use_curvature, self.shadows, self.shadow_bias,
-                              self.shadow_slack)
+                              self.shadow_slack, self.refine_steps, self.refine_window,
+                              self.shadow_verify)
         self.stats.update(self.data.stats)
         self.stats.update(tile_size=tile_size, depth_tile=spec.depth, c_range_tile=(lo, hi),
                           n_curvatures=len(self.data.curvatures),

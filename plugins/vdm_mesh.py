@@ -25,6 +25,7 @@ cannot see its shape; a shape that owns the estimate and calls ``bsdf.attach`` s
 from __future__ import annotations
 
 import time
+import warnings
 
 import drjit as dr
 import mitsuba as mi
@@ -75,6 +76,14 @@ class VDMMesh(mi.Mesh):
         params["faces"] = mi.UInt32(np.asarray(faces, np.uint32).ravel())
         params.update()
         K, c_max, c_min = mesh_curvature.curvature_tensors(pos, nrm, faces)
+        self.curvature_warning = None
+        if not (np.any(c_max != 0) or np.any(c_min != 0)) and mesh_curvature.is_curved(pos, faces):
+            self.curvature_warning = (
+                f"vdm_mesh {props.id() or ''!r}: the curvature estimate is zero everywhere on "
+                "a curved mesh (no two faces share a vertex position?): VDM silhouettes and "
+                "curvature will be missing; weld the mesh")
+            warnings.warn(self.curvature_warning)
+            mi.Log(mi.LogLevel.Warn, self.curvature_warning)
         diag, off = mesh_curvature.pack(K)
         self.add_attribute(KDIAG, 3, mi.Float(diag.ravel()))
         self.add_attribute(KOFF, 3, mi.Float(off.ravel()))

@@ -4,7 +4,8 @@ Estimator (Rusinkiewicz 2004, "Estimating curvatures and their derivatives on tr
 meshes"): per face, the shape operator II in the face plane is the least-squares fit of
 ``II e = dn`` over its three edges e (dn: difference of the vertex normals along e); each
 vertex averages the faces around it weighted by area, after projecting onto its own
-tangent plane.  UV-seam twins (same position) are welded for the average.
+tangent plane.  Vertices at the same position (UV-seam twins, per-corner normals) are
+welded: one normal (the mean of their normals) and one tensor per position.
 
 The tensor is stored in world coordinates as a symmetric 3x3 matrix
 ``K = c_max C_max C_max^T + c_min C_min C_min^T`` (tangent to the vertex normal), so that
@@ -37,11 +38,18 @@ def curvature_tensors(positions: np.ndarray, normals: np.ndarray, faces: np.ndar
     """
     p = np.asarray(positions, np.float64)
     n = np.asarray(normals, np.float64)
-    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
     f = np.asarray(faces, np.int64)
     _, weld = np.unique(p.astype(np.float32), axis=0, return_inverse=True)
     weld = weld.ravel()
     n_groups = int(weld.max()) + 1
+    # one normal per position: files with per-corner normals (one `vn` per face corner,
+    # e.g. flat-shaded exports) split every vertex, and their corners' normals are the
+    # face's, so dn = 0 on every edge; the mean of the corner normals at each welded
+    # position is the smooth normal the estimate needs (unchanged where they agree)
+    acc_n = np.zeros((n_groups, 3))
+    np.add.at(acc_n, weld, n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30))
+    n = acc_n[weld]
+    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
     # face frame
     e = [p[f[:, (k + 2) % 3]] - p[f[:, (k + 1) % 3]] for k in range(3)]   # edge opposite k
     dn = [n[f[:, (k + 2) % 3]] - n[f[:, (k + 1) % 3]] for k in range(3)]
@@ -115,3 +123,19 @@ def tile_scale(positions: np.ndarray, uvs: np.ndarray, faces: np.ndarray, tiling
     mean = float(np.sum(w * s))
     spread = float(np.sqrt(np.sum(w * (s - mean) ** 2)) / mean)
     return mean, spread
+
+
+def is_curved(positions: np.ndarray, faces: np.ndarray, tolerance: float = 1e-6) -> bool:
+    """True when the faces' normals are not all parallel (the mesh bends somewhere).
+
+    The second eigenvalue of the scatter matrix of unit face normals is 0 exactly for a
+    planar mesh (all normals +-n); ``tolerance`` bounds it otherwise.
+    """
+    p = np.asarray(positions, np.float64)
+    f = np.asarray(faces, np.int64)
+    fn = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+    norm = np.linalg.norm(fn, axis=1)
+    fn = fn[norm > 0] / norm[norm > 0, None]
+    if len(fn) < 2:
+        return False
+    return bool(np.linalg.eigvalsh(fn.T @ fn / len(fn))[1] > tolerance)
