@@ -60,9 +60,12 @@ def nested_objects(props: mi.Properties, cls):
     """The nested objects of type ``cls`` in ``props`` as (name, object) pairs."""
     out = []
     for name in props.keys():
-        value = props.get(name)
-        if isinstance(value, cls):
-            out.append((name, value))
+        # read objects only: props.get marks a property as used, and reading every key
+        # would hide the user's misspelt parameters from Mitsuba's unreferenced check
+        if props.type(name) == mi.Properties.Type.Object:
+            value = props.get(name)
+            if isinstance(value, cls):
+                out.append((name, value))
     return out
 
 
