@@ -188,7 +188,8 @@ class MesostructureBSDF(mi.BSDF):
         return active & self._prepare(si, active)[1]
 
     # -- mi.BSDF -------------------------------------------------------------------------
-    def eval(self, ctx, si, wo, active=True):
+    def _eval_radiance(self, ctx, si, wo, active):
+        """f cos(theta_o) with the view along si.wi and the light along wo (radiance)."""
         active = mi.Bool(active) & (si.wi.z > 0)
         state, blocked, si2 = self._prepare(si, active)
         wo_world = si.to_world(wo)
@@ -196,6 +197,21 @@ class MesostructureBSDF(mi.BSDF):
         f = self.nested.eval(ctx, si2, si2.to_local(wo_world), ok)
         ok &= self._lit(state, wo_world)
         return dr.select(ok, mi.Spectrum(f), 0.0)
+
+    def eval(self, ctx, si, wo, active=True):
+        if ctx.mode != mi.TransportMode.Importance:
+            return self._eval_radiance(ctx, si, wo, active)
+        # adjoint transport (ptracer): the path towards the sensor leaves along wo, so wo
+        # is the view (T', silhouettes) and si.wi the light; the value is the radiance
+        # one with the roles swapped, times Veach's shading-normal correction
+        # |wo.Ng| / |wi.Ng| (the meso normal is a shading normal of the coarse mesh)
+        si_v = mi.SurfaceInteraction3f(si)
+        si_v.wi = wo
+        radiance = mi.BSDFContext(mi.TransportMode.Radiance, ctx.type_mask, ctx.component)
+        f = self._eval_radiance(radiance, si_v, si.wi, active)
+        ng = si.to_local(si.n)
+        correction = dr.abs(dr.dot(wo, ng)) / dr.maximum(dr.abs(dr.dot(si.wi, ng)), 1e-6)
+        return f * correction
 
     def pdf(self, ctx, si, wo, active=True):
         active = mi.Bool(active) & (si.wi.z > 0)
@@ -209,8 +225,11 @@ class MesostructureBSDF(mi.BSDF):
         wo_world = si.to_world(wo)
         ok = active & ~blocked
         f, pdf = self.nested.eval_pdf(ctx, si2, si2.to_local(wo_world), ok)
+        pdf = dr.select(ok, pdf, 0.0)
+        if ctx.mode == mi.TransportMode.Importance:
+            return self.eval(ctx, si, wo, active), pdf
         lit = ok & (wo.z > 0) & self._lit(state, wo_world)
-        return dr.select(lit, mi.Spectrum(f), 0.0), dr.select(ok, pdf, 0.0)
+        return dr.select(lit, mi.Spectrum(f), 0.0), pdf
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         active = mi.Bool(active)
@@ -221,6 +240,10 @@ class MesostructureBSDF(mi.BSDF):
         wo = si.to_local(wo_world)
         keep = front & (wo.z > 0) & self._lit(state, wo_world)
         weight = dr.select(keep, mi.Spectrum(weight), 0.0)
+        if ctx.mode == mi.TransportMode.Importance:
+            # sampled in the frame seen from wi, weighted by the adjoint value (eval)
+            keep = front & (wo.z > 0) & (bs.pdf > 0)
+            weight = dr.select(keep, self.eval(ctx, si, wo, keep) / dr.maximum(bs.pdf, 1e-30), 0.0)
         passes = active & blocked  # silhouette: the ray goes on (Null component)
         bs.wo = dr.select(passes, -si.wi, wo)
         bs.pdf = dr.select(passes, 1.0, dr.select(keep, bs.pdf, 0.0))
