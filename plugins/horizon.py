@@ -58,7 +58,7 @@ class Horizon(MesostructureBSDF):
         frame = TileFrame(si, self.tiling)
         T = mi.Point2f(si.uv.x * self.tiling[0], si.uv.y * self.tiling[1])
         _, grad = self.tiled(T)
-        normal = frame.meso_normal(grad, self.depth)
+        normal = frame.meso_normal(grad, self.D * self._world_tile(si, self.used_tile, active))
         return (frame, T), dr.zeros(mi.Bool, dr.width(T.x)), shading_interaction(si, si.uv, normal, frame.a)
 
     def _lit(self, state, wo_world):

@@ -38,7 +38,7 @@ import numpy as np
 from mi_displace.core.texture_height import check_texture_finite
 from mi_displace.vdm import build, table
 from mi_displace.vdm.lookup import cached_lookup
-from mi_displace.vdm.steps import VDMSteps
+from mi_displace.vdm.steps import VDMSteps, placement_scale
 
 
 def _number(props, name, default, low=None, high=None, integer=False):
@@ -165,6 +165,14 @@ class MesostructureBSDF(mi.BSDF):
             self.stats["periodicity_warning"] = message
             warnings.warn(message)
             mi.Log(mi.LogLevel.Warn, message)
+
+    def _world_tile(self, si, tile_size: float, active) -> mi.Float:
+        """World size of one tile at ``si``: ``tile_size`` (the mesh's own units) times the
+        placement scale of a ``vdm_mesh`` (its to_world, an instance); ``tile_size`` as
+        given on other shapes."""
+        if not self._meshes:
+            return dr.full(mi.Float, tile_size, dr.width(si.t))
+        return tile_size * placement_scale(si, active)
 
     def _require(self, ready: bool) -> None:
         if not ready:
