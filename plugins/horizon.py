@@ -66,6 +66,9 @@ class Horizon(MesostructureBSDF):
         ct, theta, phi, _ = frame.direction(wo_world)
         return (ct > 0) & (dr.pi / 2 - theta > self.lookup.beta(T, phi))
 
+    def _sizes(self) -> dict:
+        return {"res": self.res, "azimuths": self.azimuths}
+
     def to_string(self):
         return f"Horizon[res={self.res}, azimuths={self.azimuths}, depth={self.depth}]"
 

@@ -70,6 +70,9 @@ class Relief(MesostructureBSDF):
         return (ct > 0) & ~march_shadow(self.tiled, T, h, ct, step * tile, D,
                                         self.shadow_steps)
 
+    def _sizes(self) -> dict:
+        return {"steps": self.steps, "shadow_steps": self.shadow_steps}
+
     def to_string(self):
         return f"Relief[steps={self.steps}, refine={self.refine}, depth={self.depth}]"
 

@@ -36,7 +36,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.core.texture_height import check_texture_finite
-from mi_displace.vdm import build, table
+from mi_displace.vdm import auto, build, table
 from mi_displace.vdm.lookup import cached_lookup
 from mi_displace.vdm.steps import VDMSteps, placement_scale
 
@@ -166,6 +166,21 @@ class MesostructureBSDF(mi.BSDF):
             warnings.warn(message)
             mi.Log(mi.LogLevel.Warn, message)
 
+    @property
+    def build_stats(self) -> dict:
+        """What was built and why (``render --explain``): table dims, bytes, build time,
+        cache hit, the tile size and, with ``"auto"`` sizes, the projected tile size."""
+        keys = ("res", "theta", "phi", "curvatures", "svd_terms", "mvm_terms", "auto",
+                "table_bytes", "compressed_bytes", "build_time_s", "load_time_s", "cached",
+                "tile_size", "depth_tile", "c_range_tile", "n_curvatures", "azimuths",
+                "steps", "shadow_steps")
+        merged = dict(self.stats, **self._sizes())
+        return {k: merged[k] for k in keys if k in merged}
+
+    def _sizes(self) -> dict:
+        """The plugin's own size parameters (subclasses)."""
+        return {}
+
     def _world_tile(self, si, tile_size: float, active) -> mi.Float:
         """World size of one tile at ``si``: ``tile_size`` (the mesh's own units) times the
         placement scale of a ``vdm_mesh`` (its to_world, an instance); ``tile_size`` as
@@ -284,9 +299,15 @@ class VDM(MesostructureBSDF):
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
+        self.auto = {k for k in ("res", "theta") if str(props.get(k, "")).strip() == "auto"}
+        self.sensor = props.get("sensor", None) if "sensor" in props else None
+        if self.auto and not isinstance(self.sensor, mi.Sensor):
+            raise ValueError("vdm: 'res'/'theta' = 'auto' sizes the table from the projected "
+                             "size of one tile: give the sensor (<ref name=\"sensor\" "
+                             "id=\"...\"/>)")
         self.spec = build.VDMSpec(
-            res=_number(props, "res", 128, 1, 1024, True),
-            n_theta=_number(props, "theta", 8, 2, 64, True),
+            res=128 if "res" in self.auto else _number(props, "res", 128, 1, 1024, True),
+            n_theta=8 if "theta" in self.auto else _number(props, "theta", 8, 2, 64, True),
             n_phi=_number(props, "phi", 32, 4, 256, True),
             n_curv=_number(props, "curvatures", 16, 1, 64, True),
             theta_oversample=_number(props, "theta_oversample", 1, 1, 8, True))
@@ -315,11 +336,26 @@ class VDM(MesostructureBSDF):
 
     # -- table -----------------------------------------------------------------------------
     def _setup(self, tile_size: float, meshes) -> None:
+        if self.auto:
+            self._auto_sizes(tile_size, meshes)
         curvatures = None
         if meshes:
             curvatures = (np.concatenate([m["c_min"] for m in meshes]),
                           np.concatenate([m["c_max"] for m in meshes]))
         self._build(tile_size, curvatures, bool(meshes))
+
+    def _auto_sizes(self, tile_size: float, meshes) -> None:
+        """res / theta from the projected size of one tile (:mod:`mi_displace.vdm.auto`)."""
+        if not meshes:
+            raise ValueError("vdm: 'res'/'theta' = 'auto' needs the BSDF inside a vdm_mesh")
+        tile_px = max(auto.projected_tile_pixels(self.sensor, m["positions"], m["faces"],
+                                                 tile_size * m["scale"]) for m in meshes)
+        chosen = auto.auto_sizes(tile_px, self.depth / tile_size)
+        if "res" in self.auto:
+            self.spec.res = chosen["res"]
+        if "theta" in self.auto:
+            self.spec.n_theta = chosen["theta"]
+        self.stats["auto"] = {k: chosen[k] for k in ("tile_px", *sorted(self.auto))}
 
     def _build(self, tile_size: float, curvatures, use_curvature: bool) -> None:
         lo = hi = 0.0
@@ -343,6 +379,9 @@ class VDM(MesostructureBSDF):
         spec = build.VDMSpec(res=self.spec.res, n_theta=self.spec.n_theta, n_phi=self.spec.n_phi,
                              n_curv=self.spec.n_curv, depth=self.depth / tile_size,
                              c_range=(lo, hi), theta_oversample=self.spec.theta_oversample)
+        if "theta" in self.auto:  # enough columns for the requested eigen-functions
+            need = math.ceil(max(self.svd_terms, self.mvm_terms) / len(spec.curvatures())) - 1
+            spec.n_theta = self.spec.n_theta = max(spec.n_theta, need)
         # the SVD keeps at most one eigen-function per table column: check before building
         stored = min(build.K_STORED, len(spec.curvatures()) * (spec.n_theta + 1))
         for name, k in (("svd_terms", self.svd_terms), ("mvm_terms", self.mvm_terms)):
@@ -364,6 +403,11 @@ class VDM(MesostructureBSDF):
                           n_curvatures=len(self.data.curvatures),
                           curvature_clamped_vertices=clamped,
                           table_bytes=self.data.table_bytes(), compressed_bytes=lookup.nbytes)
+
+    def _sizes(self) -> dict:
+        s = self.spec
+        return {"res": s.res, "theta": s.n_theta, "phi": s.n_phi, "curvatures": s.n_curv,
+                "svd_terms": self.svd_terms, "mvm_terms": self.mvm_terms}
 
     def rebuild(self, res=None, theta=None, phi=None, curvatures=None, svd_terms=None,
                 mvm_terms=None, use_cache=None) -> None:

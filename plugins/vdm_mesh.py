@@ -100,7 +100,8 @@ class VDMMesh(mi.Mesh):
             for key, name in FACE_FORMS.items():
                 self.add_attribute(name, 3, mi.Float(forms[key].ravel()))
             bsdf.attach({"tile_size": tile, "tile_spread": spread, "c_max": c_max,
-                         "c_min": c_min, "name": self.id()})
+                         "c_min": c_min, "name": self.id(), "positions": pos, "faces": faces,
+                         "scale": abs(float(np.linalg.det(m[:3, :3]))) ** (1 / 3)})
             self.build_stats.update({k: v for k, v in bsdf.stats.items()
                                      if isinstance(v, (int, float, bool))})
         self.build_stats["build_s"] = time.perf_counter() - start
