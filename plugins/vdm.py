@@ -288,7 +288,10 @@ class MesostructureBSDF(mi.BSDF):
         return dr.select(active & ~blocked, mi.Spectrum(albedo), 0.0)
 
     def traverse(self, cb):
-        pass
+        # the nested material's parameters (nested.*), editable and differentiable as on
+        # any Mitsuba BSDF; the table itself is not a parameter (it depends on the height
+        # texture only through a precomputation)
+        cb.put("nested", self.nested, mi.ParamFlags.Differentiable)
 
 
 class VDM(MesostructureBSDF):
