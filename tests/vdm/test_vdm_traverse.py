@@ -38,7 +38,9 @@ def test_nested_material_is_editable(variant, kind):
     assert np.asarray(mi.render(scene)).mean() == pytest.approx(0.5 * before, rel=1e-5)
 
 
+@pytest.mark.slow
 def test_gradient_of_the_nested_material(variant):
+    """~35 s on a loaded 2-core machine (prb's kernels compile): slow."""
     # gradient through Mitsuba's own differentiable integrator: the direct-light image is
     # linear in the albedo, so d mean / d albedo = mean / albedo
     scene = _scene("vdm", {"type": "prb", "max_depth": 2})
