@@ -48,6 +48,7 @@ class Horizon(MesostructureBSDF):
         start = time.perf_counter()
         self.used_tile = float(tile_size)
         heights = table.sample_heights(self.height, self.res, self.tiling)
+        self._check_periodic(heights)
         self.D = self.depth / self.used_tile
         self.lookup = HorizonLookup(horizon_table(heights, self.D, self.azimuths, self.max_distance))
         self.stats.update(build_time_s=time.perf_counter() - start, table_bytes=self.lookup.nbytes,
@@ -58,13 +59,16 @@ class Horizon(MesostructureBSDF):
         frame = TileFrame(si, self.tiling)
         T = mi.Point2f(si.uv.x * self.tiling[0], si.uv.y * self.tiling[1])
         _, grad = self.tiled(T)
-        normal = frame.meso_normal(grad, self.depth)
+        normal = frame.meso_normal(grad, self.D * self._world_tile(si, self.used_tile, active))
         return (frame, T), dr.zeros(mi.Bool, dr.width(T.x)), shading_interaction(si, si.uv, normal, frame.a)
 
     def _lit(self, state, wo_world):
         frame, T = state
         ct, theta, phi, _ = frame.direction(wo_world)
         return (ct > 0) & (dr.pi / 2 - theta > self.lookup.beta(T, phi))
+
+    def _sizes(self) -> dict:
+        return {"res": self.res, "azimuths": self.azimuths}
 
     def to_string(self):
         return f"Horizon[res={self.res}, azimuths={self.azimuths}, depth={self.depth}]"

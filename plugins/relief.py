@@ -21,6 +21,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mi_displace.plugins.vdm import MesostructureBSDF, _number
+from mi_displace.vdm import table
 from mi_displace.vdm.frame import TiledHeight, TileFrame, shading_interaction
 from mi_displace.vdm.relief import march_shadow, march_view
 from mi_displace.plugins._guard import constructor
@@ -43,6 +44,7 @@ class Relief(MesostructureBSDF):
 
     def _setup(self, tile_size, meshes):
         self.used_tile = float(tile_size)
+        self._check_periodic(table.sample_heights(self.height, 64, self.tiling))
         self.stats.update(tile_size=self.used_tile, table_bytes=0)
 
     def _prepare(self, si, active):
@@ -50,23 +52,27 @@ class Relief(MesostructureBSDF):
         D = self.depth / self.used_tile
         frame = TileFrame(si, self.tiling)
         ct, _, _, step = frame.direction(si.to_world(si.wi))
+        tile = self._world_tile(si, self.used_tile, active)
         T = mi.Point2f(si.uv.x * self.tiling[0], si.uv.y * self.tiling[1])
         if D > 0:
-            T, h = march_view(self.tiled, T, ct, step * self.used_tile, D, self.steps, self.refine)
+            T, h = march_view(self.tiled, T, ct, step * tile, D, self.steps, self.refine)
         else:
             h = dr.zeros(mi.Float, dr.width(T.x))
         _, grad = self.tiled(T)
-        normal = frame.meso_normal(grad, self.depth)
+        normal = frame.meso_normal(grad, D * tile)
         uv = self.tiled.uv(T)
-        return (frame, T, h, D), dr.zeros(mi.Bool, dr.width(T.x)), shading_interaction(si, uv, normal, frame.a)
+        return (frame, T, h, D, tile), dr.zeros(mi.Bool, dr.width(T.x)), shading_interaction(si, uv, normal, frame.a)
 
     def _lit(self, state, wo_world):
-        frame, T, h, D = state
+        frame, T, h, D, tile = state
         ct, _, _, step = frame.direction(wo_world)
         if self.shadow_steps == 0 or D == 0:
             return ct > 0
-        return (ct > 0) & ~march_shadow(self.tiled, T, h, ct, step * self.used_tile, D,
+        return (ct > 0) & ~march_shadow(self.tiled, T, h, ct, step * tile, D,
                                         self.shadow_steps)
+
+    def _sizes(self) -> dict:
+        return {"steps": self.steps, "shadow_steps": self.shadow_steps}
 
     def to_string(self):
         return f"Relief[steps={self.steps}, refine={self.refine}, depth={self.depth}]"

@@ -16,6 +16,8 @@
             <integer name="svd_terms" value="8"/>   <!-- paper: 8 VDM + 4 MVM -->
             <integer name="mvm_terms" value="4"/>
             <boolean name="shadows" value="true"/>
+            <integer name="refine_steps" value="8"/>  <!-- T' refinement; 0 = the paper -->
+            <integer name="shadow_verify" value="3"/> <!-- shadow check; 0 = the paper -->
             <bsdf type="diffuse"/>                   <!-- the nested material -->
         </bsdf>
     </shape>
@@ -27,16 +29,17 @@ use on any shape (c_V = 0).  Algorithm: :mod:`mi_displace.vdm`.
 from __future__ import annotations
 
 import math
+import warnings
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from mi_displace.core.texture_height import check_texture_finite
-from mi_displace.vdm import build, table
+from mi_displace.vdm import auto, build, table
 from mi_displace.vdm.lookup import cached_lookup
-from mi_displace.vdm.steps import VDMSteps
 from mi_displace.plugins._guard import constructor
+from mi_displace.vdm.steps import VDMSteps, placement_scale
 
 
 def _number(props, name, default, low=None, high=None, integer=False):
@@ -58,9 +61,12 @@ def nested_objects(props: mi.Properties, cls):
     """The nested objects of type ``cls`` in ``props`` as (name, object) pairs."""
     out = []
     for name in props.keys():
-        value = props.get(name)
-        if isinstance(value, cls):
-            out.append((name, value))
+        # read objects only: props.get marks a property as used, and reading every key
+        # would hide the user's misspelt parameters from Mitsuba's unreferenced check
+        if props.type(name) == mi.Properties.Type.Object:
+            value = props.get(name)
+            if isinstance(value, cls):
+                out.append((name, value))
     return out
 
 
@@ -153,6 +159,37 @@ class MesostructureBSDF(mi.BSDF):
                    f"over mesh {mesh_info.get('name')!r} (UV scale mismatch): the table assumes "
                    f"one tile size ({tile:.4g}); expect stretched relief there")
 
+    def _check_periodic(self, heights) -> None:
+        """Warn (once) when one tile is not one period of the height texture."""
+        message = table.periodicity_warning(heights, self.PLUGIN, self.tiling)
+        if message and message != self.stats.get("periodicity_warning"):
+            self.stats["periodicity_warning"] = message
+            warnings.warn(message)
+            mi.Log(mi.LogLevel.Warn, message)
+
+    @property
+    def build_stats(self) -> dict:
+        """What was built and why (``render --explain``): table dims, bytes, build time,
+        cache hit, the tile size and, with ``"auto"`` sizes, the projected tile size."""
+        keys = ("res", "theta", "phi", "curvatures", "svd_terms", "mvm_terms", "auto",
+                "table_bytes", "compressed_bytes", "build_time_s", "load_time_s", "cached",
+                "tile_size", "depth_tile", "c_range_tile", "n_curvatures", "azimuths",
+                "steps", "shadow_steps")
+        merged = dict(self.stats, **self._sizes())
+        return {k: merged[k] for k in keys if k in merged}
+
+    def _sizes(self) -> dict:
+        """The plugin's own size parameters (subclasses)."""
+        return {}
+
+    def _world_tile(self, si, tile_size: float, active) -> mi.Float:
+        """World size of one tile at ``si``: ``tile_size`` (the mesh's own units) times the
+        placement scale of a ``vdm_mesh`` (its to_world, an instance); ``tile_size`` as
+        given on other shapes."""
+        if not self._meshes:
+            return dr.full(mi.Float, tile_size, dr.width(si.t))
+        return tile_size * placement_scale(si, active)
+
     def _require(self, ready: bool) -> None:
         if not ready:
             raise ValueError(
@@ -180,7 +217,8 @@ class MesostructureBSDF(mi.BSDF):
         return active & self._prepare(si, active)[1]
 
     # -- mi.BSDF -------------------------------------------------------------------------
-    def eval(self, ctx, si, wo, active=True):
+    def _eval_radiance(self, ctx, si, wo, active):
+        """f cos(theta_o) with the view along si.wi and the light along wo (radiance)."""
         active = mi.Bool(active) & self._facing(si.wi)
         state, blocked, si2 = self._prepare(si, active)
         wo_world = si.to_world(wo)
@@ -188,6 +226,21 @@ class MesostructureBSDF(mi.BSDF):
         f = self.nested.eval(ctx, si2, si2.to_local(wo_world), ok)
         ok &= self._lit(state, wo_world)
         return dr.select(ok, mi.Spectrum(f), 0.0)
+
+    def eval(self, ctx, si, wo, active=True):
+        if ctx.mode != mi.TransportMode.Importance:
+            return self._eval_radiance(ctx, si, wo, active)
+        # adjoint transport (ptracer): the path towards the sensor leaves along wo, so wo
+        # is the view (T', silhouettes) and si.wi the light; the value is the radiance
+        # one with the roles swapped, times Veach's shading-normal correction
+        # |wo.Ng| / |wi.Ng| (the meso normal is a shading normal of the coarse mesh)
+        si_v = mi.SurfaceInteraction3f(si)
+        si_v.wi = wo
+        radiance = mi.BSDFContext(mi.TransportMode.Radiance, ctx.type_mask, ctx.component)
+        f = self._eval_radiance(radiance, si_v, si.wi, active)
+        ng = si.to_local(si.n)
+        correction = dr.abs(dr.dot(wo, ng)) / dr.maximum(dr.abs(dr.dot(si.wi, ng)), 1e-6)
+        return f * correction
 
     def pdf(self, ctx, si, wo, active=True):
         active = mi.Bool(active) & self._facing(si.wi)
@@ -201,8 +254,11 @@ class MesostructureBSDF(mi.BSDF):
         wo_world = si.to_world(wo)
         ok = active & ~blocked
         f, pdf = self.nested.eval_pdf(ctx, si2, si2.to_local(wo_world), ok)
+        pdf = dr.select(ok, pdf, 0.0)
+        if ctx.mode == mi.TransportMode.Importance:
+            return self.eval(ctx, si, wo, active), pdf
         lit = ok & self._facing(wo) & self._lit(state, wo_world)
-        return dr.select(lit, mi.Spectrum(f), 0.0), dr.select(ok, pdf, 0.0)
+        return dr.select(lit, mi.Spectrum(f), 0.0), pdf
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         active = mi.Bool(active)
@@ -213,6 +269,10 @@ class MesostructureBSDF(mi.BSDF):
         wo = si.to_local(wo_world)
         keep = front & self._facing(wo) & self._lit(state, wo_world)
         weight = dr.select(keep, mi.Spectrum(weight), 0.0)
+        if ctx.mode == mi.TransportMode.Importance:
+            # sampled in the frame seen from wi, weighted by the adjoint value (eval)
+            keep = front & self._facing(wo) & (bs.pdf > 0)
+            weight = dr.select(keep, self.eval(ctx, si, wo, keep) / dr.maximum(bs.pdf, 1e-30), 0.0)
         passes = active & blocked  # silhouette: the ray goes on (Null component)
         bs.wo = dr.select(passes, -si.wi, wo)
         bs.pdf = dr.select(passes, 1.0, dr.select(keep, bs.pdf, 0.0))
@@ -234,7 +294,10 @@ class MesostructureBSDF(mi.BSDF):
         return dr.select(active & ~blocked, mi.Spectrum(albedo), 0.0)
 
     def traverse(self, cb):
-        pass
+        # the nested material's parameters (nested.*), editable and differentiable as on
+        # any Mitsuba BSDF; the table itself is not a parameter (it depends on the height
+        # texture only through a precomputation)
+        cb.put("nested", self.nested, mi.ParamFlags.Differentiable)
 
 
 class VDM(MesostructureBSDF):
@@ -245,17 +308,26 @@ class VDM(MesostructureBSDF):
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
+        self.auto = {k for k in ("res", "theta") if str(props.get(k, "")).strip() == "auto"}
+        self.sensor = props.get("sensor", None) if "sensor" in props else None
+        if self.auto and not isinstance(self.sensor, mi.Sensor):
+            raise ValueError("vdm: 'res'/'theta' = 'auto' sizes the table from the projected "
+                             "size of one tile: give the sensor (<ref name=\"sensor\" "
+                             "id=\"...\"/>)")
         self.spec = build.VDMSpec(
-            res=_number(props, "res", 128, 1, 1024, True),
-            n_theta=_number(props, "theta", 8, 2, 64, True),
+            res=128 if "res" in self.auto else _number(props, "res", 128, 1, 1024, True),
+            n_theta=8 if "theta" in self.auto else _number(props, "theta", 8, 2, 64, True),
             n_phi=_number(props, "phi", 32, 4, 256, True),
             n_curv=_number(props, "curvatures", 16, 1, 64, True),
             theta_oversample=_number(props, "theta_oversample", 1, 1, 8, True))
         self.svd_terms = _number(props, "svd_terms", 8, 1, build.K_STORED, True)
         self.mvm_terms = _number(props, "mvm_terms", 4, 1, build.K_STORED, True)
         self.shadows = bool(props.get("shadows", True))
-        self.shadow_bias = _number(props, "shadow_bias", 1.0, 0.0)
-        self.shadow_slack = _number(props, "shadow_slack", 1.0, 0.0)
+        self.shadow_bias = _number(props, "shadow_bias", 0.0, 0.0)
+        self.shadow_slack = _number(props, "shadow_slack", 0.0, 0.0)
+        self.shadow_verify = _number(props, "shadow_verify", 3, 0, 64, True)
+        self.refine_steps = _number(props, "refine_steps", 8, 0, 256, True)
+        self.refine_window = _number(props, "refine_window", 0.5, 0.0, 10.0)
         self.use_cache = bool(props.get("cache", True))
         self.curvature_percentile = _number(props, "curvature_percentile", 0.0, 0.0, 49.0)
         c_min, c_max = props.get("curvature_min", None), props.get("curvature_max", None)
@@ -273,11 +345,26 @@ class VDM(MesostructureBSDF):
 
     # -- table -----------------------------------------------------------------------------
     def _setup(self, tile_size: float, meshes) -> None:
+        if self.auto:
+            self._auto_sizes(tile_size, meshes)
         curvatures = None
         if meshes:
             curvatures = (np.concatenate([m["c_min"] for m in meshes]),
                           np.concatenate([m["c_max"] for m in meshes]))
         self._build(tile_size, curvatures, bool(meshes))
+
+    def _auto_sizes(self, tile_size: float, meshes) -> None:
+        """res / theta from the projected size of one tile (:mod:`mi_displace.vdm.auto`)."""
+        if not meshes:
+            raise ValueError("vdm: 'res'/'theta' = 'auto' needs the BSDF inside a vdm_mesh")
+        tile_px = max(auto.projected_tile_pixels(self.sensor, m["positions"], m["faces"],
+                                                 tile_size * m["scale"]) for m in meshes)
+        chosen = auto.auto_sizes(tile_px, self.depth / tile_size)
+        if "res" in self.auto:
+            self.spec.res = chosen["res"]
+        if "theta" in self.auto:
+            self.spec.n_theta = chosen["theta"]
+        self.stats["auto"] = {k: chosen[k] for k in ("tile_px", *sorted(self.auto))}
 
     def _build(self, tile_size: float, curvatures, use_curvature: bool) -> None:
         lo = hi = 0.0
@@ -301,6 +388,9 @@ class VDM(MesostructureBSDF):
         spec = build.VDMSpec(res=self.spec.res, n_theta=self.spec.n_theta, n_phi=self.spec.n_phi,
                              n_curv=self.spec.n_curv, depth=self.depth / tile_size,
                              c_range=(lo, hi), theta_oversample=self.spec.theta_oversample)
+        if "theta" in self.auto:  # enough columns for the requested eigen-functions
+            need = math.ceil(max(self.svd_terms, self.mvm_terms) / len(spec.curvatures())) - 1
+            spec.n_theta = self.spec.n_theta = max(spec.n_theta, need)
         # the SVD keeps at most one eigen-function per table column: check before building
         stored = min(build.K_STORED, len(spec.curvatures()) * (spec.n_theta + 1))
         for name, k in (("svd_terms", self.svd_terms), ("mvm_terms", self.mvm_terms)):
@@ -310,16 +400,23 @@ class VDM(MesostructureBSDF):
                     f"({len(spec.curvatures())} curvature(s) x ({spec.n_theta} theta + 1) "
                     f"columns, at most {build.K_STORED}); lower it or raise 'theta'")
         heights = table.sample_heights(self.height, spec.res, self.tiling)
+        self._check_periodic(heights)
         self.data = build.build(heights, spec, use_cache=self.use_cache)
         lookup = cached_lookup(self.data, self.svd_terms, self.mvm_terms)
         self.steps = VDMSteps(lookup, self.height, spec.depth, tile_size, self.tiling,
                               use_curvature, self.shadows, self.shadow_bias,
-                              self.shadow_slack)
+                              self.shadow_slack, self.refine_steps, self.refine_window,
+                              self.shadow_verify)
         self.stats.update(self.data.stats)
         self.stats.update(tile_size=tile_size, depth_tile=spec.depth, c_range_tile=(lo, hi),
                           n_curvatures=len(self.data.curvatures),
                           curvature_clamped_vertices=clamped,
                           table_bytes=self.data.table_bytes(), compressed_bytes=lookup.nbytes)
+
+    def _sizes(self) -> dict:
+        s = self.spec
+        return {"res": s.res, "theta": s.n_theta, "phi": s.n_phi, "curvatures": s.n_curv,
+                "svd_terms": self.svd_terms, "mvm_terms": self.mvm_terms}
 
     def rebuild(self, res=None, theta=None, phi=None, curvatures=None, svd_terms=None,
                 mvm_terms=None, use_cache=None) -> None:

@@ -13,9 +13,12 @@
 
 It is the undisplaced base (the reference surface of the paper) as an ordinary triangle
 mesh, plus per-vertex curvature tensors estimated *on this mesh* (the same estimator for
-parametric and file bases; :mod:`mi_displace.vdm.mesh_curvature`) stored as mesh
-attributes ``vertex_vdm_kdiag`` / ``vertex_vdm_koff``, which the ``vdm`` BSDF interpolates
-per pixel for c_V.  On construction it hands the measured curvatures and tile size to its
+parametric and file bases; :mod:`mi_displace.vdm.mesh_curvature`), in the mesh's own
+(object) space, stored as face attributes (``face_vdm_q*``: the second fundamental form in tile
+coordinates as a linear function of uv; ``face_vdm_uv``: the faces' own uv Jacobian),
+from which the ``vdm`` BSDF gets c_V and the world size of a tile per pixel — so instancing or a
+``to_world`` scale changes nothing in tile units, and ``depth`` follows ``to_world`` as
+``displaced``'s ``scale`` does.  On construction it hands the measured curvatures and tile size to its
 ``vdm`` BSDF, which builds its table over exactly that curvature range.
 
 Design note: the curvature could be attached to any Mitsuba mesh with ``add_attribute``,
@@ -25,6 +28,7 @@ cannot see its shape; a shape that owns the estimate and calls ``bsdf.attach`` s
 from __future__ import annotations
 
 import time
+import warnings
 
 import drjit as dr
 import mitsuba as mi
@@ -34,8 +38,8 @@ from mi_displace.core import surfaces, tessellate
 from mi_displace.core.mesh_io import load_uv_mesh
 from mi_displace.plugins.displaced import BASE_PARAMS
 from mi_displace.vdm import mesh_curvature
-from mi_displace.vdm.steps import KDIAG, KOFF
 from mi_displace.plugins._guard import constructor
+from mi_displace.vdm.steps import FACE_FORMS
 
 
 def _columns(v) -> np.ndarray:
@@ -61,10 +65,10 @@ class VDMMesh(mi.Mesh):
 
     def __init__(self, props: mi.Properties):
         start = time.perf_counter()
-        pos, nrm, uvs, faces = base_geometry(props)
+        obj_pos, obj_nrm, uvs, faces = base_geometry(props)
         m = np.array(props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float64)
-        pos = pos @ m[:3, :3].T + m[:3, 3]
-        nrm = nrm @ np.linalg.inv(m[:3, :3])
+        pos = obj_pos @ m[:3, :3].T + m[:3, 3]
+        nrm = obj_nrm @ np.linalg.inv(m[:3, :3])
         nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
         if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(nrm))):
             raise ValueError("vdm_mesh: the base has NaN/Inf positions or normals")
@@ -75,19 +79,30 @@ class VDMMesh(mi.Mesh):
         params["vertex_texcoords"] = mi.Float(np.asarray(uvs, np.float32).ravel())
         params["faces"] = mi.UInt32(np.asarray(faces, np.uint32).ravel())
         params.update()
-        K, c_max, c_min = mesh_curvature.curvature_tensors(pos, nrm, faces)
-        diag, off = mesh_curvature.pack(K)
-        self.add_attribute(KDIAG, 3, mi.Float(diag.ravel()))
-        self.add_attribute(KOFF, 3, mi.Float(off.ravel()))
+        # curvature and tile size in the mesh's own (object) space, like `displaced`'s
+        # scale: tile units do not change with to_world or an instance's transform
+        K, c_max, c_min = mesh_curvature.curvature_tensors(obj_pos, obj_nrm, faces)
+        self.curvature_warning = None
+        if not (np.any(c_max != 0) or np.any(c_min != 0)) and mesh_curvature.is_curved(pos, faces):
+            self.curvature_warning = (
+                f"vdm_mesh {props.id() or ''!r}: the curvature estimate is zero everywhere on "
+                "a curved mesh (no two faces share a vertex position?): VDM silhouettes and "
+                "curvature will be missing; weld the mesh")
+            warnings.warn(self.curvature_warning)
+            mi.Log(mi.LogLevel.Warn, self.curvature_warning)
         self.c_max, self.c_min = c_max, c_min
         self.build_stats = {"vertices": len(pos), "faces": len(faces),
                             "curvature_min": float(c_min.min()), "curvature_max": float(c_max.max())}
         bsdf = self.bsdf()
         if hasattr(bsdf, "attach"):
             tiling = getattr(bsdf, "tiling", (1.0, 1.0))
-            tile, spread = mesh_curvature.tile_scale(pos, uvs, faces, tiling)
+            tile, spread = mesh_curvature.tile_scale(obj_pos, uvs, faces, tiling)
+            forms = mesh_curvature.tile_forms(obj_pos, uvs, faces, K, tiling, tile)
+            for key, name in FACE_FORMS.items():
+                self.add_attribute(name, 3, mi.Float(forms[key].ravel()))
             bsdf.attach({"tile_size": tile, "tile_spread": spread, "c_max": c_max,
-                         "c_min": c_min, "name": self.id()})
+                         "c_min": c_min, "name": self.id(), "positions": pos, "faces": faces,
+                         "scale": abs(float(np.linalg.det(m[:3, :3]))) ** (1 / 3)})
             self.build_stats.update({k: v for k, v in bsdf.stats.items()
                                      if isinstance(v, (int, float, bool))})
         self.build_stats["build_s"] = time.perf_counter() - start

@@ -5,6 +5,13 @@ resampling with the MVM (:mod:`.curvature`, :mod:`.mvm`) -> SVD with shared weig
 (:mod:`.compression`).  Sizes follow the paper's names: ``res`` texels per side, ``n_theta``
 polar and ``n_phi`` azimuthal view samples, ``n_curv`` curvature samples over the range the
 mesh has (one sample when that range is a single value).
+
+The VDM block of the compressed matrix stores ``h = d_VDM cos(theta)`` (for a flat table,
+the depth of P' below the reference surface), not d itself: d grows like 1 / cos(theta)
+towards grazing views, so linear interpolation between the 8 theta samples overshot it by
+up to 20 % (T' beyond the true hit, on the far side of relief edges), while h is constant
+along theta over flat relief.  The lookup divides by cos(theta_V) again
+(:meth:`mi_displace.vdm.lookup.VDMLookup.d`).
 """
 from __future__ import annotations
 
@@ -102,7 +109,8 @@ class VDMData:
         return 4 * self.n_rows * n_c * (self.spec.n_theta + 1)
 
     def reconstruction_rmse(self, svd_terms: int, mvm_terms: int) -> tuple[float, float]:
-        """RMSE of the compressed VDM [tile units] and MVM [rad] against the full table.
+        """RMSE of the compressed VDM block (h = d cos theta) [tile units] and MVM [rad]
+        against the full table.
 
         Exact from the eigen data: W^T W = diag(lambda), so the squared residual of a block
         truncated at k terms is sum_{i >= k} lambda_i |E_block^i|^2.
@@ -169,7 +177,10 @@ def build(heights: np.ndarray, spec: VDMSpec, use_cache: bool = True) -> VDMData
     del t_flat
     n_c = len(curv)
     A = np.empty((n_rows, n_c * (spec.n_theta + 1)), np.float32)
-    A[:, :n_c * spec.n_theta] = np.asarray(d, np.float32).reshape(n_rows, -1)
+    # stored as h = d cos(theta) (module doc): linear in theta where d ~ 1 / cos(theta) is not
+    cos_t = np.cos(table.theta_grid(spec.n_theta)).astype(np.float32)
+    A[:, :n_c * spec.n_theta] = (np.asarray(d, np.float32).reshape(n_rows, n_c, spec.n_theta)
+                                 * cos_t).reshape(n_rows, -1)
     A[:, n_c * spec.n_theta:] = np.asarray(mvm, np.float32).reshape(n_rows, n_c)
     del d, mvm
     t2 = time.perf_counter()

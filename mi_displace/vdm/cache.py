@@ -1,8 +1,10 @@
 """On-disk cache of built VDM tables, keyed by everything that determines them.
 
 Folder: ``$MI_DISPLACE_CACHE/vdm`` if set, else ``~/.cache/mi_displace/vdm``.  The key is
-a SHA-256 over the height grid's bytes, the depth, the grid sizes, the curvature samples
-and :data:`FORMAT_VERSION`; each entry is one ``.npz``.  A corrupt or unreadable entry is
+a SHA-256 over the height grid's bytes, the depth, the grid sizes, the curvature samples,
+:data:`FORMAT_VERSION` and :func:`code_version` (a digest of the source of every module
+that builds a table, so a fix to the builder never reads tables built before it); each
+entry is one ``.npz``.  A corrupt or unreadable entry is
 rebuilt (never trusted).
 """
 from __future__ import annotations
@@ -15,7 +17,19 @@ from pathlib import Path
 
 import numpy as np
 
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
+#: The modules whose code determines a table's contents (:func:`code_version`).
+BUILDER_MODULES = ("table.py", "curvature.py", "mvm.py", "compression.py", "build.py")
+
+
+def code_version(files=None) -> str:
+    """Hex digest of the source of the table builder (``files``: paths, default the
+    :data:`BUILDER_MODULES` beside this file)."""
+    folder = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for path in files or [folder / name for name in BUILDER_MODULES]:
+        h.update(Path(path).read_bytes())
+    return h.hexdigest()[:16]
 
 
 def cache_dir() -> Path:
@@ -40,6 +54,7 @@ def key(heights: np.ndarray, **params) -> str:
 
     h.update(json.dumps({k: norm(v) for k, v in sorted(params.items())}).encode())
     h.update(str(FORMAT_VERSION).encode())
+    h.update(code_version().encode())
     return h.hexdigest()[:32]
 
 

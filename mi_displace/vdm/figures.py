@@ -9,7 +9,9 @@
   4)) and for ``mvm_terms`` 1...16 at ``svd_terms`` 8;
 * ``vdm_sweep_sizes.json``: the same against table sizes (res, phi, theta, curvatures
   varied one at a time around the paper's 128, 32, 8, 16), with the build time;
-* ``vdm_sweep.png``: both sweeps plotted.
+* ``vdm_sweep.png``: both sweeps plotted;
+* ``vdm_unseen.json/.md``: the unseen-style scenes (issue 12): every method on
+  ``vdm_bricks_grazing`` at 45, 70, 82 and 85 degrees and on ``vdm_corner_normals``.
 
 Every number is measured in this run (raster integrator, torus scene, 256 x 256, 4 x 4
 samples per pixel); nothing is drawn by hand.
@@ -57,6 +59,30 @@ def methods_figure(name: str, out: Path, res: int) -> dict:
                                                   "mask_pixels": result["mask_pixels"]})
     (out / f"vdm_methods_{name}.md").write_text(methods.markdown(result["rows"]) + "\n")
     return result
+
+
+UNSEEN = {"grazing": ROOT / "scenes" / "vdm_bricks_grazing.xml",
+          "corners": ROOT / "scenes" / "vdm_corner_normals.xml"}
+GRAZING_ANGLES = (45, 70, 82, 85)
+
+
+def unseen(out: Path, res: int) -> list[dict]:
+    """Every method on the unseen-style scenes; one Markdown table per scene/angle."""
+    from mi_displace.vdm import methods
+
+    cases = [(f"vdm_bricks_grazing, {a} deg", UNSEEN["grazing"], {"angle": str(a)})
+             for a in GRAZING_ANGLES] + [("vdm_corner_normals", UNSEEN["corners"], {})]
+    records, text = [], []
+    for title, path, params in cases:
+        result = methods.methods_table(path, dict(params, res=str(res)), repeats=3)
+        records.append({"case": title, "rows": result["rows"],
+                        "mask_pixels": result["mask_pixels"]})
+        text += [f"### {title}", "", methods.markdown(result["rows"]), "",
+                 f"Mask pixels: {result['mask_pixels']}", ""]
+        gc.collect()
+    _save_json(out / "vdm_unseen.json", records)
+    (out / "vdm_unseen.md").write_text("\n".join(text))
+    return records
 
 
 def _render_flip(scene, reference) -> tuple[float, float]:
@@ -154,7 +180,7 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default=str(ROOT / "docs" / "figures"))
     parser.add_argument("--res", type=int, default=256)
     parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--only", choices=("methods", "sweeps"), default=None)
+    parser.add_argument("--only", choices=("methods", "sweeps", "unseen"), default=None)
     args = parser.parse_args(argv)
     mi_displace.init()
     out = Path(args.out)
@@ -163,6 +189,8 @@ def main(argv=None) -> int:
         for name in SCENES:
             methods_figure(name, out, args.res)
             gc.collect()
+    if args.only in (None, "unseen"):
+        unseen(out, args.res)
     if args.only in (None, "sweeps"):
         sweeps(out, args.res, args.quick)
     return 0

@@ -5,7 +5,8 @@
 * E_VDM(theta, c): a 2-D texture (n_c, n_theta, K), clamped, bilinear;
 * E_MVM(c): a 1-D texture (n_c, K), clamped, linear.
 
-``d_VDM = sum_i W^i E_VDM^i`` and ``theta_MVM = sum_i W^i E_MVM^i``.  Texel centres match the
+``h = sum_i W^i E_VDM^i`` with ``d_VDM = h / cos(theta)`` (the table stores h = d cos theta,
+:mod:`mi_displace.vdm.build`) and ``theta_MVM = sum_i W^i E_MVM^i``.  Texel centres match the
 sampling grids of :mod:`mi_displace.vdm.table` (texels at (i + 0.5) / res, theta centred,
 phi_k = 2 pi k / n_phi, curvatures c_lo ... c_hi inclusive).
 """
@@ -24,6 +25,8 @@ from mi_displace.vdm.build import VDMData
 #: last.  Reusing the very same texture buffers across scene loads keeps the traced
 #: kernels identical, so Dr.Jit's kernel cache hits instead of recompiling per load.
 _CACHE: dict = {}
+#: Smallest cos(theta) in d = h / cos(theta) (theta_V within 0.6 deg of grazing).
+MIN_COS = 0.01
 CACHE_ENTRIES = 4
 
 
@@ -82,7 +85,8 @@ class VDMLookup:
         w = self._w(T, phi)
         e = self.e_vdm.eval(mi.Point2f(dr.clip(theta, 0.0, math.pi / 2) * (2 / math.pi),
                                        self._c_coord(c)))
-        return dr.maximum(sum((wi * ei for wi, ei in zip(w[1:], e[1:])), w[0] * e[0]), 0.0)
+        h = dr.maximum(sum((wi * ei for wi, ei in zip(w[1:], e[1:])), w[0] * e[0]), 0.0)
+        return h / dr.maximum(dr.cos(theta), MIN_COS)
 
     def mvm(self, T: mi.Point2f, phi: mi.Float, c: mi.Float) -> mi.Float:
         """theta_MVM [rad] from the nearest texel (silhouette test)."""

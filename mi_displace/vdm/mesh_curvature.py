@@ -4,9 +4,10 @@ Estimator (Rusinkiewicz 2004, "Estimating curvatures and their derivatives on tr
 meshes"): per face, the shape operator II in the face plane is the least-squares fit of
 ``II e = dn`` over its three edges e (dn: difference of the vertex normals along e); each
 vertex averages the faces around it weighted by area, after projecting onto its own
-tangent plane.  UV-seam twins (same position) are welded for the average.
+tangent plane.  Vertices at the same position (UV-seam twins, per-corner normals) are
+welded: one normal (the mean of their normals) and one tensor per position.
 
-The tensor is stored in world coordinates as a symmetric 3x3 matrix
+The tensor is returned in the coordinates of the input as a symmetric 3x3 matrix
 ``K = c_max C_max C_max^T + c_min C_min C_min^T`` (tangent to the vertex normal), so that
 the curvature along any direction V is ``V_t^T K V_t / |V_t|^2`` with ``V_t`` the
 tangential part of V — the paper's c_V formula — and K interpolates across a triangle
@@ -37,11 +38,18 @@ def curvature_tensors(positions: np.ndarray, normals: np.ndarray, faces: np.ndar
     """
     p = np.asarray(positions, np.float64)
     n = np.asarray(normals, np.float64)
-    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
     f = np.asarray(faces, np.int64)
     _, weld = np.unique(p.astype(np.float32), axis=0, return_inverse=True)
     weld = weld.ravel()
     n_groups = int(weld.max()) + 1
+    # one normal per position: files with per-corner normals (one `vn` per face corner,
+    # e.g. flat-shaded exports) split every vertex, and their corners' normals are the
+    # face's, so dn = 0 on every edge; the mean of the corner normals at each welded
+    # position is the smooth normal the estimate needs (unchanged where they agree)
+    acc_n = np.zeros((n_groups, 3))
+    np.add.at(acc_n, weld, n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30))
+    n = acc_n[weld]
+    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
     # face frame
     e = [p[f[:, (k + 2) % 3]] - p[f[:, (k + 1) % 3]] for k in range(3)]   # edge opposite k
     dn = [n[f[:, (k + 2) % 3]] - n[f[:, (k + 1) % 3]] for k in range(3)]
@@ -88,13 +96,6 @@ def curvature_tensors(positions: np.ndarray, normals: np.ndarray, faces: np.ndar
     return K, mean + half, mean - half
 
 
-def pack(K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(diag, off) float32 (V, 3) each: (Kxx, Kyy, Kzz) and (Kxy, Kxz, Kyz)."""
-    diag = np.stack([K[:, 0, 0], K[:, 1, 1], K[:, 2, 2]], 1)
-    off = np.stack([K[:, 0, 1], K[:, 0, 2], K[:, 1, 2]], 1)
-    return diag.astype(np.float32), off.astype(np.float32)
-
-
 def tile_scale(positions: np.ndarray, uvs: np.ndarray, faces: np.ndarray, tiling) -> tuple[float, float]:
     """World size of one texture tile: area-weighted mean of sqrt(A_world / A_tile) over the
     faces, and its relative spread (area-weighted standard deviation / mean).
@@ -115,3 +116,74 @@ def tile_scale(positions: np.ndarray, uvs: np.ndarray, faces: np.ndarray, tiling
     mean = float(np.sum(w * s))
     spread = float(np.sqrt(np.sum(w * (s - mean) ** 2)) / mean)
     return mean, spread
+
+
+def is_curved(positions: np.ndarray, faces: np.ndarray, tolerance: float = 1e-6) -> bool:
+    """True when the faces' normals are not all parallel (the mesh bends somewhere).
+
+    The second eigenvalue of the scatter matrix of unit face normals is 0 exactly for a
+    planar mesh (all normals +-n); ``tolerance`` bounds it otherwise.
+    """
+    p = np.asarray(positions, np.float64)
+    f = np.asarray(faces, np.int64)
+    fn = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+    norm = np.linalg.norm(fn, axis=1)
+    fn = fn[norm > 0] / norm[norm > 0, None]
+    if len(fn) < 2:
+        return False
+    return bool(np.linalg.eigvalsh(fn.T @ fn / len(fn))[1] > tolerance)
+
+
+def tile_forms(positions: np.ndarray, uvs: np.ndarray, faces: np.ndarray, K: np.ndarray,
+               tiling, tile_size: float) -> dict[str, np.ndarray]:
+    """Transform-invariant curvature attributes for rendering (instances, to_world).
+
+    Per face the uv Jacobian J = [dp/du, dp/dv] (exact for a linear triangle); per vertex
+    the area-weighted mean of its faces' J (by vertex index: UV-seam twins keep their own
+    chart), and ``Q = J_T^T K J_T tile_size`` (Q11, Q12, Q22): the second fundamental form
+    in tile coordinates (T = uv * tiling).  With the world Gram matrix G of the tile
+    vectors at a pixel and s the local scale of the shape's placement, the curvature along
+    a tangent with tile coordinates w is ``c = s^2 w^T Q w / (w^T G w)`` tile^-1, whatever
+    rotation or uniform scale places the mesh (``mi_displace.vdm.steps.view_curvature``).
+
+    Everything is returned per face (F, 3) float32, so that a renderer needs no
+    barycentric coordinates (Mitsuba computes them from world positions, wrong inside an
+    instance): ``q`` (Q at the face's uv centroid), ``q_du``, ``q_dv`` (its uv gradient:
+    Q(uv) is the barycentric interpolation of the vertex values) and ``uv`` = (centroid u,
+    centroid v, |dp/du x dp/dv|, the reference of s = sqrt(world area / this)).
+
+    Args:
+        positions (V, 3), uvs (V, 2), faces (F, 3): the mesh in the space K was measured in.
+        K: (V, 3, 3) curvature tensors of :func:`curvature_tensors`.
+        tiling: (u, v) texture periods per unit uv; tile_size: one tile in those units.
+    """
+    p = np.asarray(positions, np.float64)
+    t = np.asarray(uvs, np.float64)
+    f = np.asarray(faces, np.int64)
+    e1, e2 = p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]]
+    d1, d2 = t[f[:, 1]] - t[f[:, 0]], t[f[:, 2]] - t[f[:, 0]]
+    det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    ok = np.abs(det) > 1e-20
+    inv = 1.0 / np.where(ok, det, 1.0)
+    dp_du = ((d2[:, 1] * inv)[:, None] * e1 - (d1[:, 1] * inv)[:, None] * e2) * ok[:, None]
+    dp_dv = ((-d2[:, 0] * inv)[:, None] * e1 + (d1[:, 0] * inv)[:, None] * e2) * ok[:, None]
+    area = np.linalg.norm(np.cross(dp_du, dp_dv), axis=1)
+    w = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1) * ok
+    J = np.zeros((len(p), 3, 2))
+    wsum = np.zeros(len(p))
+    Jf = np.stack([dp_du / float(tiling[0]), dp_dv / float(tiling[1])], 2) * w[:, None, None]
+    for k in range(3):  # scatter each face's Jacobian to its three corners
+        np.add.at(J, f[:, k], Jf)
+        np.add.at(wsum, f[:, k], w)
+    J /= np.maximum(wsum, 1e-30)[:, None, None]
+    II = np.einsum("vai,vab,vbj->vij", J, K, J) * float(tile_size)
+    Q = np.stack([II[:, 0, 0], 0.5 * (II[:, 0, 1] + II[:, 1, 0]), II[:, 1, 1]], 1)
+    # per face, Q as a linear function of uv (what barycentric interpolation of the vertex
+    # values gives): at the uv centroid and its uv gradient
+    dq1, dq2 = Q[f[:, 1]] - Q[f[:, 0]], Q[f[:, 2]] - Q[f[:, 0]]
+    q_du = ((d2[:, 1] * inv)[:, None] * dq1 - (d1[:, 1] * inv)[:, None] * dq2) * ok[:, None]
+    q_dv = ((-d2[:, 0] * inv)[:, None] * dq1 + (d1[:, 0] * inv)[:, None] * dq2) * ok[:, None]
+    uv_c = t[f].mean(1)
+    forms = {"q": Q[f].mean(1), "q_du": q_du, "q_dv": q_dv,
+             "uv": np.concatenate([uv_c, area[:, None]], 1)}
+    return {k: v.astype(np.float32) for k, v in forms.items()}

@@ -20,6 +20,46 @@ from mi_displace.vdm.frame import TiledHeight
 MIN_COS = 0.02
 
 
+def first_crossing(below, lo: mi.Float, hi: mi.Float, steps: int, refine: int,
+                   label: str = "relief") -> tuple[mi.Float, mi.Bool]:
+    """First parameter in [lo, hi] where the predicate ``below(s)`` turns true.
+
+    A linear search in ``steps`` equal steps finds the first sample below the surface,
+    then ``refine`` bisections between it and the sample before it locate the crossing.
+    Where no sample is below, the result is ``hi`` and ``found`` is false.
+
+    Args:
+        below: callable Float -> Bool (the ray point at parameter s lies below the height
+            field).
+        lo, hi: the search interval per lane (same units as s).
+    """
+    n = dr.width(lo) if dr.width(lo) > 1 else dr.width(hi)
+    ds = (hi - lo) / steps
+
+    def lin_body(i, a, b, found):
+        s = lo + mi.Float(i + 1) * ds
+        hit = ~found & below(s)
+        b = dr.select(hit, s, b)
+        a = dr.select(~found & ~hit, s, a)
+        return i + 1, a, b, found | hit
+
+    _, a, b, found = dr.while_loop(
+        state=(mi.UInt32(0), lo + dr.zeros(mi.Float, n), hi + dr.zeros(mi.Float, n),
+               dr.zeros(mi.Bool, n)),
+        cond=lambda i, a, b, found: i < steps, body=lin_body,
+        labels=("i", "a", "b", "found"), label=f"{label}_linear")
+
+    def bis_body(i, a, b):
+        mid = 0.5 * (a + b)
+        m = below(mid)
+        return i + 1, dr.select(m, a, mid), dr.select(m, mid, b)
+
+    _, a, b = dr.while_loop(state=(mi.UInt32(0), a, b),
+                            cond=lambda i, a, b: i < refine, body=bis_body,
+                            labels=("i", "a", "b"), label=f"{label}_bisect")
+    return 0.5 * (a + b), found
+
+
 def march_view(height: TiledHeight, T: mi.Point2f, cos_t: mi.Float, dir_T: mi.Vector2f,
                D: float, steps: int, refine: int) -> tuple[mi.Point2f, mi.Float]:
     """Intersection of the view ray with the height field.
@@ -33,7 +73,6 @@ def march_view(height: TiledHeight, T: mi.Point2f, cos_t: mi.Float, dir_T: mi.Ve
     """
     cos_t = dr.maximum(cos_t, MIN_COS)
     tan_t = dr.sqrt(dr.maximum(1.0 - cos_t * cos_t, 0.0)) / cos_t
-    dz = D / steps
 
     def at(depth):
         return mi.Point2f(T.x - depth * tan_t * dir_T.x, T.y - depth * tan_t * dir_T.y)
@@ -41,28 +80,9 @@ def march_view(height: TiledHeight, T: mi.Point2f, cos_t: mi.Float, dir_T: mi.Ve
     def below(depth):
         return depth >= D * (1.0 - height.value(at(depth)))
 
-    def lin_body(i, lo, hi, found):
-        depth = mi.Float(i + 1) * dz
-        hit = ~found & below(depth)
-        hi = dr.select(hit, depth, hi)
-        lo = dr.select(~found & ~hit, depth, lo)
-        return i + 1, lo, hi, found | hit
-
     n = dr.width(cos_t)
-    _, lo, hi, _ = dr.while_loop(
-        state=(mi.UInt32(0), dr.zeros(mi.Float, n), dr.full(mi.Float, D, n), dr.zeros(mi.Bool, n)),
-        cond=lambda i, lo, hi, found: i < steps, body=lin_body,
-        labels=("i", "lo", "hi", "found"), label="relief_linear")
-
-    def bis_body(i, lo, hi):
-        mid = 0.5 * (lo + hi)
-        b = below(mid)
-        return i + 1, dr.select(b, lo, mid), dr.select(b, mid, hi)
-
-    _, lo, hi = dr.while_loop(state=(mi.UInt32(0), lo, hi),
-                              cond=lambda i, lo, hi: i < refine, body=bis_body,
-                              labels=("i", "lo", "hi"), label="relief_bisect")
-    depth = 0.5 * (lo + hi)
+    depth, _ = first_crossing(below, dr.zeros(mi.Float, n), dr.full(mi.Float, D, n), steps,
+                              refine)
     return at(depth), depth
 
 

@@ -77,6 +77,37 @@ def sample_heights(texture: mi.Texture, res: int, tiling=(1.0, 1.0)) -> np.ndarr
     return check_heights(h)
 
 
+#: Wrap-around / interior difference ratio above which a tile is not one period.
+PERIODIC_RATIO = 4.0
+
+
+def periodicity_warning(heights: np.ndarray, plugin: str, tiling) -> str | None:
+    """A warning (or None) when ``heights`` (one tile) is not periodic.
+
+    Compares the mean absolute difference across the tile's wrap-around edges with the mean
+    difference between interior neighbours (both directions): a ratio above
+    :data:`PERIODIC_RATIO` means one tile is not one period of the texture — typically the
+    texture's ``to_uv`` scale and ``tiling_u``/``tiling_v`` disagree, so the table holds a
+    fraction (or several periods) of the pattern the surface shows.
+    """
+    h = np.asarray(heights, np.float64)
+    if min(h.shape) < 4:
+        return None
+    ratios = []
+    for axis in (0, 1):
+        inner = np.abs(np.diff(h, axis=axis)).mean()
+        wrap = np.abs(np.take(h, 0, axis) - np.take(h, -1, axis)).mean()
+        if wrap > 1e-6:
+            ratios.append(wrap / max(inner, 1e-12))
+    worst = max(ratios, default=0.0)
+    if worst <= PERIODIC_RATIO:
+        return None
+    return (f"{plugin}: the height texture is not periodic over one tile (edge jump "
+            f"{worst:.1f}x the neighbour difference): one tile must be one period of the "
+            f"texture as it appears on the surface; check its to_uv scale against "
+            f"tiling_u/tiling_v = {tiling[0]:g}/{tiling[1]:g}")
+
+
 def heightfield_mesh(heights: np.ndarray, D: float) -> mi.Mesh:
     """The zero-curvature mesostructure of one tile as a Mitsuba mesh (tile units).
 

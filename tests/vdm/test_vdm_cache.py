@@ -1,4 +1,6 @@
 """On-disk table cache keyed by the inputs."""
+from pathlib import Path
+
 import numpy as np
 
 from mi_displace.vdm import build, cache
@@ -34,3 +36,20 @@ def test_hit_miss_and_corrupt_entry(variant, tmp_path, monkeypatch):
     third = build.build(_heights(), spec)
     assert third.stats["cached"] is False
     np.testing.assert_allclose(third.compressed.weights, first.compressed.weights, atol=1e-6)
+
+
+def test_key_depends_on_the_builder_code(tmp_path, monkeypatch):
+    h = _heights()
+    base = cache.key(h, depth=0.1)
+    # the digest covers every builder module's bytes: an edited copy gives another version
+    copies = []
+    for name in cache.BUILDER_MODULES:
+        src = Path(cache.__file__).with_name(name)
+        (tmp_path / name).write_bytes(src.read_bytes())
+        copies.append(tmp_path / name)
+    assert cache.code_version(copies) == cache.code_version()
+    copies[0].write_bytes(copies[0].read_bytes() + b"# a fix\n")
+    assert cache.code_version(copies) != cache.code_version()
+    # and the key follows the code version
+    monkeypatch.setattr(cache, "code_version", lambda files=None: "another build")
+    assert cache.key(h, depth=0.1) != base
