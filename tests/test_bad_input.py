@@ -32,10 +32,6 @@ from mi_displace.plugins import PLUGIN_MODULES
 from mi_displace.render import scene as scenes
 
 NAN = math.nan
-TYPO_XFAIL = ("issue 15 item 1: the mesostructure BSDFs read every property while looking for "
-              "nested objects, which hides typos from Mitsuba's unreferenced-property check "
-              "(plugins/vdm.py nested_objects; the vdm branch fixes it)")
-
 
 def _garbage(tmp_path: Path, suffix: str) -> str:
     path = tmp_path / f"garbage{suffix}"
@@ -166,9 +162,6 @@ CASES = {
 
 #: (plugin, case) -> reason, for cases that fail today in code owned by another branch.
 XFAIL = {
-    ("vdm", "misspelt"): TYPO_XFAIL,
-    ("horizon", "misspelt"): TYPO_XFAIL,
-    ("relief", "misspelt"): TYPO_XFAIL,
     ("restored", "garbage_file"): "a map that is not an image: mi.Bitmap's RuntimeError 'Unknown "
                                   "file format' (no file name) escapes mi_displace/bake/formats.py "
                                   "read_png_raw (bake branch)",
