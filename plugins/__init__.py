@@ -20,6 +20,8 @@ PLUGIN_MODULES = [
     "mi_displace.plugins.horizon",
     "mi_displace.plugins.relief",
     "mi_displace.plugins.restored",
+    "mi_displace.plugins.displaced_volume",
+    "mi_displace.plugins.volume_slicer",
 ]
 
 _registered_for: str | None = None
