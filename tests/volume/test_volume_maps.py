@@ -5,13 +5,7 @@ import numpy as np
 import pytest
 
 
-def _p(xyz):
-    xyz = np.atleast_2d(np.asarray(xyz, float))
-    return mi.Point3f(*(mi.Float(xyz[:, i]) for i in range(3)))
-
-
-def _np(v):
-    return np.stack([np.array(c) for c in v], axis=-1)
+from volume_helpers import points as _p, to_numpy as _np
 
 
 RNG = np.random.default_rng(7)

@@ -10,9 +10,7 @@ import pytest
 DATA = Path(__file__).resolve().parents[2] / "data" / "volumes"
 
 
-def _points(xyz):
-    xyz = np.atleast_2d(np.asarray(xyz, float))
-    return mi.Point3f(*(mi.Float(xyz[:, i]) for i in range(3)))
+from volume_helpers import points as _points
 
 
 def _raw(tmp_path, data, meta):
