@@ -22,6 +22,7 @@ PLUGIN_MODULES = [
     "mi_displace.plugins.restored",
     "mi_displace.plugins.displaced_volume",
     "mi_displace.plugins.volume_slicer",
+    "mi_displace.plugins.volume_isosurface",
 ]
 
 _registered_for: str | None = None

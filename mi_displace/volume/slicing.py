@@ -164,6 +164,7 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
         si = dr.zeros(mi.SurfaceInteraction3f)
         amb += mi.Color3f(e.eval(si))
     normals = s.model == "surface" and s.normals != "fd"
+    bias = 2.0 * (float((hi - lo).max()) / max(gn - 1, 1)) if gn else 0.0
 
     def cond(k, T, L):
         return hit & (k <= k1) & (T > EARLY_STOP)
@@ -175,9 +176,6 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
         sigma = extinction(vol, s, x, r)
         a = 1.0 - dr.exp(-sigma * dt)
         live = a > 0
-        if grid is not None:
-            u = mi.Point3f((x - box_lo) / (box_hi - box_lo) * (gn - 1) / gn + 0.5 / gn)
-            tl = grid.eval(u, live)
         S = mi.Color3f(0.0)
         if s.model == "surface":
             n = vol.normal(x, s.normals, -ray.d, r)
@@ -185,7 +183,11 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
             it = dr.zeros(mi.Interaction3f)
             it.p = x
             ds, E = e.sample_direction(it, mi.Point2f(0.5), live)
-            shadow = tl[i] if grid is not None else 1.0
+            shadow = 1.0
+            if grid is not None:
+                # surfaces read the light grid a shadow bias towards the light (no self-shadowing)
+                xl = x + ds.d * bias if s.model == "surface" else x
+                shadow = grid.eval(mi.Point3f((xl - box_lo) / (box_hi - box_lo) * (gn - 1) / gn + 0.5 / gn), live)[i]
             if s.model == "scatter":
                 S += mi.Color3f(E) * shadow * (s.albedo / (4.0 * dr.pi))
             else:
