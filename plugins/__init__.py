@@ -23,6 +23,7 @@ PLUGIN_MODULES = [
     "mi_displace.plugins.displaced_volume",
     "mi_displace.plugins.volume_slicer",
     "mi_displace.plugins.volume_isosurface",
+    "mi_displace.plugins.volume_proxy",
 ]
 
 _registered_for: str | None = None

@@ -61,7 +61,7 @@ def _maps(props) -> list[PlacedMap]:
     out = []
     for i in range(MAX_MAPS + 1):
         key = f"map{i}_type"
-        if not props.has_property(key):
+        if not (key in props):
             break
         if i == MAX_MAPS:
             raise ValueError(f"displaced_volume: at most {MAX_MAPS} maps")
@@ -69,15 +69,15 @@ def _maps(props) -> list[PlacedMap]:
         if kind not in primitives.PRIMITIVES:
             raise ValueError(f"displaced_volume: {key} {kind!r} is not one of {', '.join(primitives.PRIMITIVES)}")
         params = {name: props.get(f"map{i}_{name}") for name in primitives.PRIMITIVES[kind]
-                  if props.has_property(f"map{i}_{name}")}
+                  if (f"map{i}_{name}" in props)}
         res = list(primitives.DEFAULT_RESOLUTION[kind])
-        if props.has_property(f"map{i}_resolution"):
+        if (f"map{i}_resolution" in props):
             res = [int(props.get(f"map{i}_resolution"))] * 3
         for a, axis in enumerate("xyz"):
-            if props.has_property(f"map{i}_res_{axis}"):
+            if (f"map{i}_res_{axis}" in props):
                 res[a] = int(props.get(f"map{i}_res_{axis}"))
         to_world = None
-        if props.has_property(f"map{i}_to_world"):
+        if (f"map{i}_to_world" in props):
             to_world = np.array(props.get(f"map{i}_to_world").matrix, dtype=float).reshape(4, 4)
         out.append(PlacedMap(kind, params, to_world, res))
     return out
@@ -120,6 +120,10 @@ class DisplacedVolumePlugin(mi.Volume):
         self._bbox = mi.ScalarBoundingBox3f(mi.ScalarPoint3f(lo), mi.ScalarPoint3f(hi))
         self._max = self.volume.majorant()
         self.build_stats = {"texture_bytes": self.volume.nbytes(), "maps": len(self.volume.chain.maps)}
+
+    def medium_box(self) -> tuple[np.ndarray, np.ndarray]:
+        """The box Mitsuba clips this volume to (fixed at load time; see ``bounds``)."""
+        return self._box
 
     def eval(self, it, active=True):
         return mi.Color3f(self.volume.sigma_t(it.p))

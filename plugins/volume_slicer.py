@@ -42,6 +42,7 @@ class VolumeSlicer(mi.SamplingIntegrator):
             iso=float(props.get("iso", 0.5)), sharpness=float(props.get("sharpness", 4.0)),
             shadows=bool(props.get("shadows", True)),
             light_resolution=props.get("light_resolution", None), aa=int(props.get("aa", 1)))
+        slicing.check_slices(volume.volume, self.settings)
 
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
         if isinstance(sensor, int):

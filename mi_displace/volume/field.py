@@ -8,7 +8,8 @@ and τ the linear transfer ramp ``clip((v - tf_low) / (tf_high - tf_low), 0, 1)`
 
 Majorant: τ <= τ(max O) and the mask is 0 or 1, whatever the displacement does, so
 ``density_scale · τ(max of the voxels)`` bounds sigma_t everywhere (trilinear interpolation
-never exceeds the largest voxel; displacement only moves where O is read).
+never exceeds the largest voxel — up to float32 rounding, hence a 1e-5 relative margin;
+displacement only moves where O is read, and the proxy box holds every displaced point).
 
 Normals (unit, pointing out of dense matter, i.e. along -∇):
 
@@ -86,9 +87,10 @@ class DisplacedVolume:
         return self.density_scale * self.density(p)
 
     def majorant(self) -> float:
-        """density_scale · τ(largest voxel): bounds sigma_t (module docstring)."""
+        """density_scale · τ(largest voxel), raised by 1e-5 relative: bounds sigma_t (module
+        docstring; float32 trilinear weights can sum to a few ulp above 1)."""
         top = float(np.clip((self.obj.data.max() - self.tf_low) / (self.tf_high - self.tf_low), 0, 1))
-        return self.density_scale * top
+        return self.density_scale * top * (1 + 1e-5)
 
     def proxy_box(self) -> tuple[np.ndarray, np.ndarray]:
         """World bounding box of the displaced object (§4.2 proxy geometry)."""

@@ -66,6 +66,18 @@ class SliceSettings:
         self.shadows, self.light_resolution, self.aa = bool(shadows), light_resolution, int(aa)
 
 
+def check_slices(vol: DisplacedVolume, s: SliceSettings) -> int:
+    """Most slices any view can need (proxy diagonal / spacing); ValueError beyond MAX_SLICES.
+
+    Call it when the integrator is built, so that the error comes before any kernel runs."""
+    lo, hi = vol.proxy_box()
+    count = int(math.ceil(float(np.linalg.norm(hi - lo)) / (s.spacing * float(vol.obj.voxel_size.min()))))
+    if count > MAX_SLICES:
+        raise ValueError(f"spacing: up to {count} slices through the proxy box, more than {MAX_SLICES}; "
+                         "raise the spacing")
+    return count
+
+
 def extinction(vol: DisplacedVolume, s: SliceSettings, p: mi.Point3f, lookup=None) -> mi.Float:
     """Extinction [1/world unit] of the chosen model at world points."""
     if s.model == "scatter":
@@ -92,7 +104,7 @@ def light_grid(vol: DisplacedVolume, s: SliceSettings, lights, lo, hi):
     """
     if not lights:
         return 0, None
-    n = s.light_resolution or int(np.clip(max(vol.obj.shape) // 2, 16, 96))
+    n = s.light_resolution or int(np.clip(max(vol.obj.shape), 24, 96))  # about one node per object voxel
     n = int(n)
     axes = [np.linspace(lo[i], hi[i], n) for i in range(3)]
     z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
@@ -132,10 +144,7 @@ def _slice_frame(sensor: mi.Sensor, lo, hi, spacing):
     corners = np.array([[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])])
     depth = (corners - origin) @ forward
     zmin, zmax = max(float(depth.min()), 0.0), float(depth.max())
-    count = int(math.ceil(max(zmax - zmin, 0.0) / spacing))
-    if count > MAX_SLICES:
-        raise ValueError(f"spacing: {count} slices through the proxy box, more than {MAX_SLICES}; "
-                         "raise the spacing")
+    count = min(int(math.ceil(max(zmax - zmin, 0.0) / spacing)), MAX_SLICES)
     return origin, forward, zmin, count
 
 
