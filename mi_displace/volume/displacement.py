@@ -223,10 +223,12 @@ class DisplacementChain:
         self.bits, self.smoothing, self.composition = int(bits), float(smoothing), composition
         self.composite_resolution = check_resolution(composite_resolution, "composite_resolution")
         self._composite = None
+        self.version = 0
 
     def changed(self) -> None:
-        """Call after editing a map: drops the precomputed composite."""
+        """Call after editing a map: drops the precomputed composite (and renderer caches)."""
         self._composite = None
+        self.version += 1
 
     def exact(self, p: mi.Point3f) -> Lookup:
         """Pre-images through the procedural maps (reference mode) and the exact α."""
