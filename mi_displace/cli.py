@@ -41,6 +41,7 @@ SUMMARY_COLUMNS = (
 COMMAND_MODULES = [
     "mi_displace.ddm.cli",
     "mi_displace.bake.cli",
+    "mi_displace.volume.cli",
 ]
 
 

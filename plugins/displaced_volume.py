@@ -27,7 +27,8 @@ constructor returns, so ``<volume type=...>`` works).  It is not called ``displa
 names share one registry, and that name is our displacement *shape*.
 
 Editable through ``mi.traverse`` (the object textures are not rebuilt, only the edited map's
-D_k): ``map{i}.{parameter}`` and ``map{i}.to_world``.
+D_k): ``map{i}_{parameter}`` and ``map{i}_to_world``, named as in the XML (no dots: Mitsuba's
+``SceneParameters.update`` reads a dot as a child object and would not notify the volume).
 """
 from __future__ import annotations
 
@@ -141,22 +142,23 @@ class DisplacedVolumePlugin(mi.Volume):
         self._editable = {}
         for i, m in enumerate(self.volume.chain.maps):
             for name, value in m.params.items():
-                self._editable[f"map{i}.{name}"] = mi.Float(value)
-            self._editable[f"map{i}.to_world"] = mi.Transform4f(m.placement.matrix)
+                self._editable[f"map{i}_{name}"] = mi.Float(value)
+            self._editable[f"map{i}_to_world"] = mi.Transform4f(m.placement.matrix)
         for key, value in self._editable.items():
             callback.put(key, value, mi.ParamFlags.NonDifferentiable)
 
     def parameters_changed(self, keys=[]):
         """Re-sample only the D_k of the edited maps (the object textures stay)."""
         for i, m in enumerate(self.volume.chain.maps):
-            mine = [k for k in keys if k.startswith(f"map{i}.")]
+            prefix = f"map{i}_"
+            mine = [k for k in keys if k.startswith(prefix)]
             if not mine:
                 continue
-            params = {k.split(".", 1)[1]: float(self._editable[k][0]) for k in mine
-                      if not k.endswith(".to_world")}
+            params = {k[len(prefix):]: float(self._editable[k][0]) for k in mine
+                      if k != f"{prefix}to_world"}
             to_world = None
-            if f"map{i}.to_world" in mine:
-                to_world = np.array(self._editable[f"map{i}.to_world"].matrix, dtype=float).reshape(4, 4)
+            if f"{prefix}to_world" in mine:
+                to_world = np.array(self._editable[f"{prefix}to_world"].matrix, dtype=float).reshape(4, 4)
             m.set(params, to_world)
         self.volume.chain.changed()
         self._refresh()

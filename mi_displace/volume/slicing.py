@@ -136,11 +136,22 @@ def light_grid(vol: DisplacedVolume, s: SliceSettings, lights, lo, hi):
     """Transmittance from each grid node of the proxy box to each delta light (one channel per
     light), marched at the slice spacing through the model's extinction.
 
+    Cached per chain version, model settings and light directions (a new frame of an animation
+    rebuilds it; a new camera does not).
+
     Returns:
         (nodes per axis, texture), or (0, None) without lights.
     """
     if not lights:
         return 0, None
+    probe = dr.zeros(mi.Interaction3f, 1)
+    light_key = tuple(tuple(np.array(c).item() for c in e.sample_direction(probe, mi.Point2f(0.5))[0].d)
+                      for e in lights)
+    key = (vol.chain.version, vol.mode, s.model, s.iso, s.sharpness, s.spacing, s.light_resolution,
+           light_key, tuple(np.round(lo, 6)), tuple(np.round(hi, 6)))
+    cache = getattr(vol, "_light_grid", None)
+    if cache is not None and cache[0] == key:
+        return cache[1]
     n = s.light_resolution or int(np.clip(max(vol.obj.shape), 24, 96))  # about one node per object voxel
     n = int(n)
     axes = [np.linspace(lo[i], hi[i], n) for i in range(3)]
@@ -170,8 +181,10 @@ def light_grid(vol: DisplacedVolume, s: SliceSettings, lights, lo, hi):
                                cond=cond, body=body, label="volume_light_grid")
         channels.append(np.asarray(dr.exp(-tau)).reshape(n, n, n))
     grid = np.stack(channels, axis=-1).astype(np.float32)
-    return n, mi.Texture3f(mi.TensorXf(grid), use_accel=False, filter_mode=dr.FilterMode.Linear,
-                        wrap_mode=dr.WrapMode.Clamp)
+    result = (n, mi.Texture3f(mi.TensorXf(grid), use_accel=False, filter_mode=dr.FilterMode.Linear,
+                              wrap_mode=dr.WrapMode.Clamp))
+    vol._light_grid = (key, result)
+    return result
 
 
 def _slice_frame(sensor: mi.Sensor, lo, hi, spacing):

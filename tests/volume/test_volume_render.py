@@ -104,8 +104,8 @@ def test_traverse_edits_maps_without_rebuilding_the_object(variant):
     before = _render(scene)
     textures = vol.volume.obj.textures()
     params = mi.traverse(vol)
-    assert "map0.angle" in params and "map0.to_world" in params
-    params["map0.angle"] = 60.0
+    assert "map0_angle" in params and "map0_to_world" in params
+    params["map0_angle"] = 60.0
     params.update()
     after = _render(scene)
     assert vol.volume.obj.textures() is textures
