@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from mi_displace.core.io import to_srgb
+from mi_displace.evaluate.compare import protocol_settings, scene_defaults
 
 SCENES = sorted((Path(__file__).resolve().parents[1] / "scenes").glob("*.xml"))
-SIDES = {"reference": "path", "approximation": "raster"}
 
 
 def render(path, spp, seed=0, **params):
@@ -38,10 +38,15 @@ def elsewhere(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("path", SCENES, ids=lambda p: p.stem)
 def test_scene_renders_both_sides(variant, path, elsewhere):
+    # each side's integrator as the scene declares it (volume scenes: volpath / volume_slicer);
     # `resolution` (tessellation) exists on the reference side only in some scenes
+    settings = protocol_settings(path)
+    sides = {"reference": settings["reference_integrator"],
+             "approximation": settings["approximation_integrator"]}
+    tess = {"resolution": 64} if "resolution" in scene_defaults(path) else {}
     images = {mode: render(path, 4, mode=mode, integrator=integ, res=48,
-                           **({"resolution": 64} if mode == "reference" else {}))
-              for mode, integ in SIDES.items()}
+                           **(tess if mode == "reference" else {}))
+              for mode, integ in sides.items()}
     for mode, img in images.items():
         assert img.mean() > 0.01, f"{path.name} ({mode}) is black"
     assert abs(images["reference"].mean() / images["approximation"].mean() - 1) < 0.5

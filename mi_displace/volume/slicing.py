@@ -132,9 +132,11 @@ def _box_intersect(lo, hi, ray: mi.Ray3f):
     return hit & (t1 > 0), dr.maximum(t0, 0.0), t1
 
 
-def light_grid(vol: DisplacedVolume, s: SliceSettings, lights, lo, hi):
+def light_grid(vol: DisplacedVolume, s: SliceSettings, lights, lo, hi, film_size: int = 96):
     """Transmittance from each grid node of the proxy box to each delta light (one channel per
-    light), marched at the slice spacing through the model's extinction.
+    light), marched at the slice spacing through the model's extinction.  Nodes per axis:
+    ``light_resolution``, else about one per object voxel but no more than the film's larger
+    side (a finer shadow than the image resolves is wasted), clamped to [24, 96].
 
     Cached per chain version, model settings and light directions (a new frame of an animation
     rebuilds it; a new camera does not).
@@ -152,7 +154,7 @@ def light_grid(vol: DisplacedVolume, s: SliceSettings, lights, lo, hi):
     cache = getattr(vol, "_light_grid", None)
     if cache is not None and cache[0] == key:
         return cache[1]
-    n = s.light_resolution or int(np.clip(max(vol.obj.shape), 24, 96))  # about one node per object voxel
+    n = s.light_resolution or int(np.clip(min(max(vol.obj.shape), film_size), 24, 96))
     n = int(n)
     axes = [np.linspace(lo[i], hi[i], n) for i in range(3)]
     z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
@@ -206,7 +208,8 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
     origin, forward, zmin, count = _slice_frame(sensor, lo, hi, spacing)
     lights = [e for e in scene.emitters() if _is_delta(e)]
     ambient = [e for e in scene.emitters() if _is_ambient(e)]
-    gn, grid = light_grid(vol, s, lights, lo, hi) if (s.model == "scatter" or s.shadows) else (0, None)
+    film = max(sensor.film().crop_size())
+    gn, grid = light_grid(vol, s, lights, lo, hi, film) if (s.model == "scatter" or s.shadows) else (0, None)
     ray, weight, w, h = pixel_rays(sensor, s.aa)
     hit, t0, t1 = _box_intersect(lo, hi, ray)
     fwd = mi.ScalarVector3f(forward)
