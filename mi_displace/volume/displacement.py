@@ -129,8 +129,10 @@ class SampledMap:
         lo, hi = mi.ScalarPoint3f(self.lo), mi.ScalarPoint3f(self.hi)
         return mi.Point3f((l - lo) / (hi - lo) * (n - 1) / n + 0.5 / n)
 
-    def lookup(self, p: mi.Point3f, normals: bool):
-        """(D, α_s, Jᵀ or None, ∇α_s or None) at world points p' (world units)."""
+    def lookup(self, p: mi.Point3f, normals: bool, active=True):
+        """(D, α_s, Jᵀ or None, ∇α_s or None) at world points p' (world units).  ``active`` is
+        accepted for symmetry but not used: on the LLVM backend masked texture reads measured
+        slower than full reads."""
         u = self._coords(p)
         t = self.disp.eval(u)
         d, alpha = mi.Vector3f(t[0], t[1], t[2]), 1.0 - t[3]
@@ -261,15 +263,15 @@ class DisplacementChain:
             return [self.composite()]
         return [m.sampled(self.bits, self.smoothing) for m in self.maps]
 
-    def approximate(self, p: mi.Point3f, normals: bool = False) -> Lookup:
+    def approximate(self, p: mi.Point3f, normals: bool = False, active=True) -> Lookup:
         """Pre-images through the D_k textures (approximation mode), α_s, and optionally the
-        chain's B (Matrix3f) and ∇α_s (world units)."""
+        chain's B (Matrix3f) and ∇α_s (world units); ``active`` masks the texture reads."""
         q = mi.Point3f(p)
         alpha = dr.full(mi.Float, 1.0, dr.width(p.x))
         B = dr.identity(mi.Matrix3f) if normals else None
         galpha = mi.Vector3f(0.0) if normals else None
         for s in reversed(self.sampled_maps()):
-            d, a, jac_t, ga = s.lookup(q, normals)
+            d, a, jac_t, ga = s.lookup(q, normals, active)
             if normals:
                 # product rule for ∇(Π α) and the chain rule B <- B (I + J)ᵀ (eq. 6, 10)
                 galpha = galpha * a + alpha * (B @ ga)

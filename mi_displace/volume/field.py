@@ -96,13 +96,15 @@ class DisplacedVolume:
         """World bounding box of the displaced object (§4.2 proxy geometry)."""
         return self.chain.proxy_box(self.obj.bbox_min, self.obj.bbox_max)
 
-    def smooth_field(self, p: mi.Point3f) -> mi.Float:
+    def smooth_field(self, p: mi.Point3f, active=True) -> mi.Float:
         """τ(O(G(p'))) α_s(p'): the displaced field without the hard 1/2 threshold (for FD)."""
-        r = self.chain.approximate(p) if self.mode == "approximation" else self.chain.exact(p)
-        return self.transfer(self.obj.density(r.p)) * r.alpha
+        r = self.chain.approximate(p, active=active) if self.mode == "approximation" else self.chain.exact(p)
+        return self.transfer(self.obj.density(r.p, active)) * r.alpha
 
-    def normal(self, p: mi.Point3f, method: str, fallback: mi.Vector3f, lookup=None) -> mi.Vector3f:
-        """Unit normal at world points p' by ``method`` (module docstring)."""
+    def normal(self, p: mi.Point3f, method: str, fallback: mi.Vector3f, lookup=None,
+               active=True) -> mi.Vector3f:
+        """Unit normal at world points p' by ``method`` (module docstring); texture reads are
+        masked by ``active`` (the renderer asks only where a slice sample is visible)."""
         if method not in NORMALS:
             raise ValueError(f"normals: must be one of {NORMALS}, got {method!r}")
         if method == "fd":
@@ -112,10 +114,10 @@ class DisplacedVolume:
                 e = [0.0, 0.0, 0.0]
                 e[axis] = h
                 step = mi.Vector3f(e)
-                g.append((self.smooth_field(p + step) - self.smooth_field(p - step)) / (2 * h))
+                g.append((self.smooth_field(p + step, active) - self.smooth_field(p - step, active)) / (2 * h))
             return safe_normalize(-mi.Vector3f(g[0], g[1], g[2]), fallback)
-        r = lookup if lookup is not None and lookup.B is not None else self.chain.approximate(p, True)
-        grad = self.obj.gradient(r.p)
+        r = lookup if lookup is not None and lookup.B is not None else self.chain.approximate(p, True, active)
+        grad = self.obj.gradient(r.p, active)
         if method == "gradient":
             return safe_normalize(-grad, fallback)
         bent = safe_normalize(r.B @ grad, -fallback)  # eq. 6

@@ -75,7 +75,7 @@ def normal_angles(scene) -> dict:
 
     vol = scene.integrator().plugin.volume
     verts, faces = isosurface(vol, 0.5, 128)
-    mesh = mi.Mesh("iso", len(verts), len(faces))
+    mesh = mi.Mesh("iso", len(verts), len(faces), mi.Properties(), True, False)
     params = mi.traverse(mesh)
     params["vertex_positions"] = mi.Float(verts.ravel())
     params["faces"] = mi.UInt32(faces.ravel())

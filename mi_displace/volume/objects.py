@@ -114,16 +114,16 @@ class ObjectVolume:
         inside = dr.all((u >= 0) & (u <= 1))
         return mi.Point3f(u), inside
 
-    def density(self, p: mi.Point3f) -> mi.Float:
-        """O(p) in [0, 1] at world points (trilinear; 0 outside the box)."""
+    def density(self, p: mi.Point3f, active=True) -> mi.Float:
+        """O(p) in [0, 1] at world points (trilinear; 0 outside the box or ``active``)."""
         u, inside = self.texture_coords(p)
-        return dr.select(inside, self.textures()[0].eval(u)[0], 0.0)
+        return dr.select(inside & active, self.textures()[0].eval(u)[0], 0.0)
 
-    def gradient(self, p: mi.Point3f) -> mi.Vector3f:
-        """Precomputed ∇O(p) (world units; 0 outside the box)."""
+    def gradient(self, p: mi.Point3f, active=True) -> mi.Vector3f:
+        """Precomputed ∇O(p) (world units; 0 outside the box or ``active``)."""
         u, inside = self.texture_coords(p)
         g = self.textures()[1].eval(u)
-        return dr.select(inside, mi.Vector3f(g[0], g[1], g[2]), 0.0)
+        return dr.select(inside & active, mi.Vector3f(g[0], g[1], g[2]), 0.0)
 
     def nbytes(self) -> int:
         """Bytes of the object and gradient textures (float32)."""

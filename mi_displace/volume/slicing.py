@@ -244,13 +244,14 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
         far = box_lo + (mi.Vector3f(c) + dr.select(ray.d > 0, 1.0, 0.0)) * cell_size
         t_exit = dr.min((far - ray.o) * inv_d)
         k_skip = dr.ceil((z_ray + t_exit * cos_f - zmin) / spacing - 0.5)
-        r = vol.lookup(x, normals) if s.model == "surface" else vol.lookup(x)
+        r = vol.lookup(x, normals)
         sigma = extinction(vol, s, x, r)
         a = 1.0 - dr.exp(-sigma * dt)
-        live = a > 0
+        live = (a > 0) & full
         S = mi.Color3f(0.0)
         if s.model == "surface":
-            n = vol.normal(x, s.normals, -ray.d, r)
+            # B and ∇α come with the lookup above; ∇O (and FD) are read only where visible
+            n = vol.normal(x, s.normals, -ray.d, r, live)
         for i, e in enumerate(lights):
             it = dr.zeros(mi.Interaction3f)
             it.p = x
@@ -266,7 +267,7 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
                 S += mi.Color3f(E) * shadow * dr.maximum(dr.dot(n, ds.d), 0.0) / dr.pi
         if s.model == "surface":
             S = rho * (S + amb)
-        L = L + dr.select(live & full, T * a * S, 0.0)
+        L = L + dr.select(live, T * a * S, 0.0)
         T = dr.select(full, T * (1.0 - a), T)
         return dr.select(full, k + 1.0, dr.maximum(k + 1.0, k_skip)), T, L
 
