@@ -129,7 +129,7 @@ class SampledMap:
         lo, hi = mi.ScalarPoint3f(self.lo), mi.ScalarPoint3f(self.hi)
         return mi.Point3f((l - lo) / (hi - lo) * (n - 1) / n + 0.5 / n)
 
-    def lookup(self, p: mi.Point3f, normals: bool, active=True):
+    def lookup(self, p: mi.Point3f, normals: bool, active=True, alpha_gradient=True):
         """(D, α_s, Jᵀ or None, ∇α_s or None) at world points p' (world units).  ``active`` is
         accepted for symmetry but not used: on the LLVM backend masked texture reads measured
         slower than full reads."""
@@ -139,8 +139,10 @@ class SampledMap:
         if not normals:
             return d, alpha, None, None
         j = self.jac.eval(u)
-        g = self.galpha.eval(u)
         jac_t = mi.Matrix3f(j[0], j[3], j[6], j[1], j[4], j[7], j[2], j[5], j[8])
+        if not alpha_gradient:
+            return d, alpha, jac_t, None
+        g = self.galpha.eval(u)
         return d, alpha, jac_t, mi.Vector3f(g[0], g[1], g[2])
 
 
@@ -263,18 +265,20 @@ class DisplacementChain:
             return [self.composite()]
         return [m.sampled(self.bits, self.smoothing) for m in self.maps]
 
-    def approximate(self, p: mi.Point3f, normals: bool = False, active=True) -> Lookup:
+    def approximate(self, p: mi.Point3f, normals: bool = False, active=True,
+                    alpha_gradient: bool = True) -> Lookup:
         """Pre-images through the D_k textures (approximation mode), α_s, and optionally the
-        chain's B (Matrix3f) and ∇α_s (world units); ``active`` masks the texture reads."""
+        chain's B (Matrix3f) and — unless ``alpha_gradient`` is False — ∇α_s (world units)."""
         q = mi.Point3f(p)
         alpha = dr.full(mi.Float, 1.0, dr.width(p.x))
         B = dr.identity(mi.Matrix3f) if normals else None
-        galpha = mi.Vector3f(0.0) if normals else None
+        galpha = mi.Vector3f(0.0) if normals and alpha_gradient else None
         for s in reversed(self.sampled_maps()):
-            d, a, jac_t, ga = s.lookup(q, normals, active)
+            d, a, jac_t, ga = s.lookup(q, normals, active, alpha_gradient)
             if normals:
                 # product rule for ∇(Π α) and the chain rule B <- B (I + J)ᵀ (eq. 6, 10)
-                galpha = galpha * a + alpha * (B @ ga)
+                if galpha is not None:
+                    galpha = galpha * a + alpha * (B @ ga)
                 B = B @ (dr.identity(mi.Matrix3f) + jac_t)
             q, alpha = q + d, alpha * a
         return Lookup(q, alpha, B, galpha)

@@ -72,11 +72,12 @@ class DisplacedVolume:
         """τ(v): the linear transfer ramp."""
         return dr.clip((v - self.tf_low) / (self.tf_high - self.tf_low), 0.0, 1.0)
 
-    def lookup(self, p: mi.Point3f, normals: bool = False):
-        """Pre-image lookup through the chain in this volume's mode."""
+    def lookup(self, p: mi.Point3f, normals: bool = False, alpha_gradient: bool = True):
+        """Pre-image lookup through the chain in this volume's mode (``normals``: also B and,
+        with ``alpha_gradient``, ∇α_s from the D_k textures)."""
         if self.mode == "reference":
             return self.chain.exact(p)
-        return self.chain.approximate(p, normals)
+        return self.chain.approximate(p, normals, alpha_gradient=alpha_gradient)
 
     def density(self, p: mi.Point3f, lookup=None) -> mi.Float:
         """τ(O(p)) · [α >= 1/2] at world points p' (dimensionless, in [0, 1])."""
@@ -116,7 +117,8 @@ class DisplacedVolume:
                 step = mi.Vector3f(e)
                 g.append((self.smooth_field(p + step, active) - self.smooth_field(p - step, active)) / (2 * h))
             return safe_normalize(-mi.Vector3f(g[0], g[1], g[2]), fallback)
-        r = lookup if lookup is not None and lookup.B is not None else self.chain.approximate(p, True, active)
+        reusable = lookup is not None and lookup.B is not None and (method != "blend" or lookup.galpha is not None)
+        r = lookup if reusable else self.chain.approximate(p, True, active)
         grad = self.obj.gradient(r.p, active)
         if method == "gradient":
             return safe_normalize(-grad, fallback)

@@ -244,7 +244,7 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
         far = box_lo + (mi.Vector3f(c) + dr.select(ray.d > 0, 1.0, 0.0)) * cell_size
         t_exit = dr.min((far - ray.o) * inv_d)
         k_skip = dr.ceil((z_ray + t_exit * cos_f - zmin) / spacing - 0.5)
-        r = vol.lookup(x, normals)
+        r = vol.lookup(x, normals, alpha_gradient=s.normals == "blend")
         sigma = extinction(vol, s, x, r)
         a = 1.0 - dr.exp(-sigma * dt)
         live = (a > 0) & full
