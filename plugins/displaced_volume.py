@@ -54,7 +54,7 @@ def _object(props):
         if procedural != "piggy_bank":
             raise ValueError(f"displaced_volume: procedural {procedural!r} is unknown (piggy_bank)")
         return piggy_bank(int(props.get("resolution", 96)))
-    path = str(mi.Thread.thread().file_resolver().resolve(filename))
+    path = str(mi.file_resolver().resolve(filename))
     return load_vol(path) if path.endswith(".vol") else load_raw(path)
 
 
