@@ -118,6 +118,11 @@ class SampledMap:
         self.jac = _texture(jac.reshape(*shape, 9))
         self.galpha = _texture(galpha)
         self.voxels = int(np.prod(res))
+        # every face of the grid holds D = 0, α = 1, J = 0 (then outside reads may be skipped)
+        faces = [d[0], d[-1], d[:, 0], d[:, -1], d[:, :, 0], d[:, :, -1]]
+        alpha_faces = [alpha[0], alpha[-1], alpha[:, 0], alpha[:, -1], alpha[:, :, 0], alpha[:, :, -1]]
+        self.bounded = all(not f.any() for f in faces) and all((f == 1).all() for f in alpha_faces) \
+            and not jac[[0, -1]].any() and not jac[:, [0, -1]].any() and not jac[:, :, [0, -1]].any()
 
     def nbytes(self) -> int:
         """Texture bytes at the stored bit depth (D 3 + α 1 + J 9 + ∇α 3 channels)."""
@@ -130,19 +135,24 @@ class SampledMap:
         return mi.Point3f((l - lo) / (hi - lo) * (n - 1) / n + 0.5 / n)
 
     def lookup(self, p: mi.Point3f, normals: bool, active=True, alpha_gradient=True):
-        """(D, α_s, Jᵀ or None, ∇α_s or None) at world points p' (world units).  ``active`` is
-        accepted for symmetry but not used: on the LLVM backend masked texture reads measured
-        slower than full reads."""
+        """(D, α_s, Jᵀ or None, ∇α_s or None) at world points p' (world units); lanes outside
+        ``active``, or outside a bounded grid, read nothing (D = 0, α = 1, J = 0 there)."""
         u = self._coords(p)
-        t = self.disp.eval(u)
+        # outside the grid (plus a node) every channel is the clamped face value: D = 0, α = 1
+        # for bounded maps, so those lanes skip the reads (masked gathers touch no memory)
+        inside = dr.all((u > -0.5 / mi.ScalarVector3f(self.res)) & (u < 1 + 0.5 / mi.ScalarVector3f(self.res)))
+        active = inside & active if self.bounded else active
+        t = self.disp.eval(u, active)
         d, alpha = mi.Vector3f(t[0], t[1], t[2]), 1.0 - t[3]
+        if self.bounded:
+            d, alpha = dr.select(active, d, 0.0), dr.select(active, alpha, 1.0)
         if not normals:
             return d, alpha, None, None
-        j = self.jac.eval(u)
+        j = self.jac.eval(u, active)
         jac_t = mi.Matrix3f(j[0], j[3], j[6], j[1], j[4], j[7], j[2], j[5], j[8])
         if not alpha_gradient:
             return d, alpha, jac_t, None
-        g = self.galpha.eval(u)
+        g = self.galpha.eval(u, active)
         return d, alpha, jac_t, mi.Vector3f(g[0], g[1], g[2])
 
 
