@@ -114,7 +114,8 @@ class DisplacedVolumePlugin(mi.Volume):
     def _refresh(self):
         self.volume.prepare()
         lo, hi = self.volume.proxy_box()
-        if (lo < self._box[0] - 1e-6).any() or (hi > self._box[1] + 1e-6).any():
+        grown = (lo < self._box[0] - 1e-6).any() or (hi > self._box[1] + 1e-6).any()
+        if grown and getattr(self, "in_medium", False):  # set by volume_proxy; slicing needs no box
             raise ValueError(f"displaced_volume: the displaced object now reaches {lo}..{hi}, outside "
                              f"the medium box {self._box[0]}..{self._box[1]} fixed at load time; "
                              "give a larger 'bounds'")
@@ -123,7 +124,10 @@ class DisplacedVolumePlugin(mi.Volume):
         self.build_stats = {"texture_bytes": self.volume.nbytes(), "maps": len(self.volume.chain.maps)}
 
     def medium_box(self) -> tuple[np.ndarray, np.ndarray]:
-        """The box Mitsuba clips this volume to (fixed at load time; see ``bounds``)."""
+        """The box Mitsuba clips this volume to (fixed at load time; see ``bounds``).  Asking
+        for it (``volume_proxy`` does) marks the volume as a medium's, so that an edit that
+        grows the displaced object past the box is refused."""
+        self.in_medium = True
         return self._box
 
     def eval(self, it, active=True):

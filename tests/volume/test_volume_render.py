@@ -99,7 +99,7 @@ def test_bad_input(variant):
 
 
 def test_traverse_edits_maps_without_rebuilding_the_object(variant):
-    vol = _volume(maps=[("peel", {"angle": 10.0, "hinge": 1.0, "height": 0.5})], bounds=2.5)
+    vol = _volume(maps=[("peel", {"angle": 10.0, "hinge": 1.0, "height": 0.5})])
     scene = _scene("volume_slicer", vol)
     before = _render(scene)
     textures = vol.volume.obj.textures()
@@ -111,3 +111,20 @@ def test_traverse_edits_maps_without_rebuilding_the_object(variant):
     assert vol.volume.obj.textures() is textures
     assert np.abs(after - before).max() > 0.1 * before.max()
     assert vol.volume.chain.maps[0].params["angle"] == 60.0
+
+
+def test_medium_volume_refuses_to_outgrow_its_box(variant):
+    """Under volpath the medium box is fixed at load time: an edit that displaces matter past
+    it is an error (naming 'bounds'), not a silently clipped reference."""
+    vol = _volume(maps=[("peel", {"angle": 10.0, "hinge": 1.0, "height": 0.5})])
+    _scene("volpath", vol)                                  # volume_proxy: the medium's container
+    params = mi.traverse(vol)
+    params["map0_angle"] = 80.0
+    with pytest.raises(Exception, match="bounds"):
+        params.update()
+    roomy = _volume(maps=[("peel", {"angle": 10.0, "hinge": 1.0, "height": 0.5})], bounds=3.0)
+    _scene("volpath", roomy)
+    params = mi.traverse(roomy)
+    params["map0_angle"] = 80.0
+    params.update()
+    assert roomy.volume.chain.maps[0].params["angle"] == 80.0
