@@ -55,6 +55,7 @@ COMMAND_MODULES = [
     "mi_displace.bake.cli",
     "mi_displace.evaluate.cli",
     "mi_displace.slicing.cli",
+    "mi_displace.volume.cli",
 ]
 
 

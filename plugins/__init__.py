@@ -22,6 +22,10 @@ PLUGIN_MODULES = [
     "mi_displace.plugins.restored",
     "mi_displace.plugins.slicing",
     "mi_displace.plugins.depth_object",
+    "mi_displace.plugins.displaced_volume",
+    "mi_displace.plugins.volume_slicer",
+    "mi_displace.plugins.volume_isosurface",
+    "mi_displace.plugins.volume_proxy",
 ]
 
 _registered_for: str | None = None

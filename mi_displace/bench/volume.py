@@ -1,0 +1,232 @@
+"""`mi-displace bench volume`: the slicing renderer's speed with and without displacement,
+texture memory, accuracy, and VTK's CPU volume renderer on the same volume.
+
+* ``voxels``: the walnut CT resampled to 256^3 (trilinear), box [-0.5, 0.5]^3;
+* ``render_time_warm_s``: ``volume_slicer`` at 512 x 512, one voxel between slices, one map
+  (a Gaussian pull, eq. 8, over the upper half, D_k 32^3 at 16 bit), Jacobian normals
+  (eq. 6), surface model without shadows (as VTK), warm median of 5 renders that alternate
+  with the undisplaced ones (a shared machine's load falls on both alike);
+  ``undisplaced_time_warm_s``: the same volume and view without the map, same process;
+  ``displacement_overhead`` = their ratio (Table 1 analogue: ``fps`` = 1 / render time);
+* ``texture_bytes``: the map's D_k, α, J and ∇α textures at 16 bit; ``object_texture_bytes``:
+  the object and gradient textures (float32); ``table2``: bytes of each primitive at the
+  paper's Table 2 resolutions;
+* ``flip``: ``mi-displace compare scenes/volume_walnut_peel.xml`` at 96 x 96, references
+  capped at 256 spp (with its ``noise_floor_flip``);
+* ``vtk_s``: VTK's ``vtkFixedPointVolumeRayCastMapper`` on the undisplaced 256^3 volume,
+  512 x 512, sample distance 1.0, automatic adjustment off, shading on, 2 threads, EGL
+  off-screen window, warm median of 3; ``null`` with ``vtk_reason`` when it cannot run.
+  The set-up step installs the PyPI ``vtk`` wheel and Debian's ``libegl1 libgl1-mesa-dri``
+  when missing (they are not dependencies of mi-displace).
+"""
+from __future__ import annotations
+
+import json as _json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+WALNUT = ROOT / "data" / "volumes" / "walnut_128x96x114_uint16.raw"
+SCENE = ROOT / "scenes" / "volume_walnut_peel.xml"
+RES, SIZE, ISO = 256, 512, 0.3
+EYE, TARGET, FOV = (0.9, -2.3, 1.3), (0.0, 0.0, 0.0), 34.0
+TARGETS = {"undisplaced_vs_vtk": 2.0, "displacement_overhead": 1.6}
+#: Paper's Table 2 maps: (primitive, resolution); our D_k needs >= 2 nodes per axis.
+TABLE2 = [("peel", (128, 128, 2), 320), ("slabs", (128, 128, 2), 320),
+          ("gaussian", (32, 32, 32), 640), ("seam", (64, 64, 64), 5120)]
+
+
+def walnut_256():
+    """The walnut CT resampled to 256^3 (trilinear), as an ObjectVolume in [-0.5, 0.5]^3."""
+    from scipy.ndimage import zoom
+
+    from mi_displace.volume.objects import ObjectVolume, load_raw
+
+    w = load_raw(WALNUT)
+    data = zoom(w.data, (RES / w.shape[0], RES / w.shape[1], RES / w.shape[2]), order=1)
+    return ObjectVolume(data, [-0.5] * 3, [0.5] * 3, value_range=(0.0, 1.0), name="walnut 256^3")
+
+
+def _sensor():
+    return mi.load_dict({"type": "perspective", "fov": FOV,
+                         "to_world": mi.ScalarTransform4f().look_at(origin=list(EYE), target=list(TARGET), up=[0, 0, 1]),
+                         "film": {"type": "hdrfilm", "width": SIZE, "height": SIZE}})
+
+
+def _interleaved_renders(scene, sensor, volumes, settings, repeats=5) -> list[tuple[float, float, np.ndarray]]:
+    """(cold, warm median, image) per volume; the warm renders alternate between the volumes so
+    that a shared machine's load falls on all of them alike."""
+    from mi_displace.volume import slicing
+
+    times = [[] for _ in volumes]
+    images = [None] * len(volumes)
+    for _ in range(repeats + 1):
+        for i, vol in enumerate(volumes):
+            dr.sync_thread()
+            start = time.perf_counter()
+            images[i] = np.array(slicing.render(scene, sensor, vol, settings))
+            times[i].append(time.perf_counter() - start)
+    for img in images:
+        if not np.isfinite(img).all():
+            raise ValueError("bench volume: non-finite pixels in the slicer's image")
+    return [(t[0], statistics.median(t[1:]), img) for t, img in zip(times, images)]
+
+
+def setup_vtk() -> str | None:
+    """Import VTK with an EGL window, installing it first when missing; the reason on failure."""
+    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    try:
+        import vtk  # noqa: F401
+        return None
+    except ImportError:
+        pass
+    steps = [[sys.executable, "-m", "pip", "install", "-q", "vtk"]]
+    if os.geteuid() == 0:
+        steps.insert(0, ["apt-get", "install", "-y", "-q", "libegl1", "libgl1-mesa-dri"])
+    for cmd in steps:
+        try:
+            subprocess.run(cmd, check=True, capture_output=True, timeout=600)
+        except (OSError, subprocess.SubprocessError) as e:
+            return f"set-up step {' '.join(cmd[:4])} failed: {e}"
+    try:
+        import vtk  # noqa: F401
+    except ImportError as e:
+        return f"vtk does not import after installing it: {e}"
+    return None
+
+
+def vtk_time(obj) -> tuple[float | None, str | None]:
+    """VTK fixed-point ray casting of the undisplaced volume (module docstring)."""
+    reason = setup_vtk()
+    if reason:
+        return None, reason
+    try:
+        import vtk
+        from vtk.util import numpy_support
+
+        n = obj.shape
+        data = np.ascontiguousarray(np.clip(obj.data * 255, 0, 255).astype(np.uint8))
+        image = vtk.vtkImageData()
+        image.SetDimensions(n[2], n[1], n[0])
+        h = obj.voxel_size
+        image.SetSpacing(*h)
+        image.SetOrigin(*(obj.bbox_min + 0.5 * h))
+        image.GetPointData().SetScalars(numpy_support.numpy_to_vtk(data.ravel(), deep=True,
+                                                                   array_type=vtk.VTK_UNSIGNED_CHAR))
+        mapper = vtk.vtkFixedPointVolumeRayCastMapper()
+        mapper.SetInputData(image)
+        mapper.SetAutoAdjustSampleDistances(0)
+        mapper.SetSampleDistance(1.0 * float(h.min()))  # one voxel, in world units
+        mapper.SetNumberOfThreads(2)
+        opacity = vtk.vtkPiecewiseFunction()
+        opacity.AddPoint(0, 0.0)
+        opacity.AddPoint(255 * (ISO - 0.03), 0.0)
+        opacity.AddPoint(255 * (ISO + 0.03), 1.0)
+        opacity.AddPoint(255, 1.0)
+        color = vtk.vtkColorTransferFunction()
+        color.AddRGBPoint(0, 0.8, 0.7, 0.55)
+        color.AddRGBPoint(255, 0.8, 0.7, 0.55)
+        prop = vtk.vtkVolumeProperty()
+        prop.SetScalarOpacity(opacity)
+        prop.SetColor(color)
+        prop.ShadeOn()
+        prop.SetInterpolationTypeToLinear()
+        volume = vtk.vtkVolume()
+        volume.SetMapper(mapper)
+        volume.SetProperty(prop)
+        renderer = vtk.vtkRenderer()
+        renderer.AddVolume(volume)
+        camera = renderer.GetActiveCamera()
+        camera.SetPosition(*EYE)
+        camera.SetFocalPoint(*TARGET)
+        camera.SetViewUp(0, 0, 1)
+        camera.SetViewAngle(FOV)
+        window = vtk.vtkRenderWindow()
+        window.SetOffScreenRendering(1)
+        window.AddRenderer(renderer)
+        window.SetSize(SIZE, SIZE)
+        times = []
+        for _ in range(4):
+            start = time.perf_counter()
+            window.Render()
+            times.append(time.perf_counter() - start)
+        return statistics.median(times[1:]), None
+    except Exception as e:  # a broken GL stack must not hide the other numbers
+        return None, f"VTK render failed: {' '.join(str(e).split())}"
+
+
+def table2() -> list[dict]:
+    """Texture bytes of each primitive at the paper's Table 2 resolutions (16 bit)."""
+    from mi_displace.volume.displacement import PlacedMap
+
+    rows = []
+    for kind, res, paper_kb in TABLE2:
+        s = PlacedMap(kind, resolution=res).sampled(16, 1.5)
+        rows.append({"map": kind, "resolution": list(res), "kb": s.nbytes() / 1024, "paper_kb": paper_kb})
+    return rows
+
+
+def run(with_flip: bool = True) -> dict:
+    from mi_displace.volume import slicing
+    from mi_displace.volume.displacement import DisplacementChain, PlacedMap
+    from mi_displace.volume.field import DisplacedVolume
+
+    obj = walnut_256()
+    sensor = _sensor()
+    scene = mi.load_dict({"type": "scene", "sun": {"type": "directional", "direction": [-0.5, 0.6, -1],
+                                                   "irradiance": {"type": "rgb", "value": 2.5}}})
+    settings = slicing.SliceSettings(model="surface", normals="jacobian", spacing=1.0, shadows=False, iso=ISO)
+    pull = PlacedMap("gaussian", {"amount": 0.5, "sigma": 0.15}, resolution=(32, 32, 32),
+                     to_world=np.array([[1.0, 0, 0, -0.5], [0, 1, 0, -0.5], [0, 0, 0.5, 0], [0, 0, 0, 1]]))
+    plain = DisplacedVolume(obj, DisplacementChain([]), mode="approximation", tf_low=0.0, tf_high=1.0)
+    displaced = DisplacedVolume(obj, DisplacementChain([pull], bits=16), mode="approximation",
+                                tf_low=0.0, tf_high=1.0)
+    (cold_u, warm_u, _), (cold_d, warm_d, img_d) = _interleaved_renders(
+        scene, sensor, [plain, displaced], settings)
+    vtk_s, vtk_reason = vtk_time(obj)
+    record = {
+        "voxels": int(obj.data.size),
+        "resolution": [SIZE, SIZE],
+        "render_time_warm_s": warm_d,
+        "render_time_cold_s": cold_d,
+        "undisplaced_time_warm_s": warm_u,
+        "undisplaced_time_cold_s": cold_u,
+        "displacement_overhead": warm_d / warm_u,
+        "fps": 1.0 / warm_d,
+        "texture_bytes": displaced.chain.nbytes(),
+        "object_texture_bytes": obj.nbytes(),
+        "coverage": float((img_d.max(-1) > 0).mean()),
+        "vtk_s": vtk_s,
+        "vtk_reason": vtk_reason,
+        "undisplaced_vs_vtk": (warm_u / vtk_s) if vtk_s else None,
+        "table2": table2(),
+        "targets": TARGETS,
+        "variant": mi.variant(),
+    }
+    if with_flip:
+        from mi_displace.evaluate.compare import compare
+
+        with tempfile.TemporaryDirectory() as tmp:
+            r = compare(SCENE, tmp, params={"res": 96}, max_spp=256)
+        record.update(flip=r["flip_mean"], flip_noise_floor=r["noise_floor_flip"],
+                      flip_reference_spp=r["reference_spp"])
+    return record
+
+
+def main(json: bool = False) -> dict:
+    record = run()
+    if json:
+        print(_json.dumps(record, indent=2))
+    else:
+        for key, value in record.items():
+            print(f"{key:>26}: {value:.4g}" if isinstance(value, float) else f"{key:>26}: {value}")
+    return record

@@ -1,0 +1,310 @@
+"""Displacement textures D_k (§4.1), placed maps (§6) and their composition (eq. 9-10).
+
+A :class:`PlacedMap` is one primitive of :mod:`mi_displace.volume.maps` with its own
+parameters, D_k resolution and placement M.  Its :class:`SampledMap` holds the §4.1 textures
+over the map's support box (node-centred grid, clamp-to-edge addressing):
+
+* ``disp``: the inverse displacement M D(M⁻¹ p') in world units and 1 - α_s (4 channels;
+  1 - α so that an all-kept map interpolates to exactly α = 1), α_s the α mask smoothed by a
+  Gaussian of ``smoothing`` voxels (§5), all quantised to ``bits`` (8, 16 or 32 = float):
+  D normalised to [-1, 1] by its largest component, as the paper's GPU textures;
+* ``jac``: J_D of the world map by central differences of the *stored* D_k at the voxel
+  spacing (9 channels); B = (I + J_D)ᵀ of eq. 6 is formed at lookup (so J = 0 gives B = I
+  exactly);
+* ``galpha``: ∇α_s in world units (3 channels), for eq. 7.
+
+A :class:`DisplacementChain` composes maps listed in *forward* order (the first acts on the
+object first): p = G_1(G_2(... G_n(p'))) (eq. 9), so lookups run from the last map to the
+first.  The normal matrix of the chain is B = B_n(p') B_{n-1}(q_{n-1}) ... B_1(q_1) (the chain
+rule; eq. 10 writes the same product for two maps), α = Π α_i(q_i), ∇α by the product rule.
+``composition="precomputed"`` samples the whole exact chain into one D_k over the union of the
+supports instead (no change in the renderer, one lookup, its own resolution).
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mi_displace.volume import maps
+from mi_displace.volume.objects import MAX_VOXELS
+
+BITS = (8, 16, 32)
+#: Most voxels of one D_k (refused before anything is allocated).
+MAX_MAP_VOXELS = 256 ** 3
+
+
+def check_resolution(res, what: str) -> tuple[int, int, int]:
+    """A D_k resolution (x, y, z): integers >= 2 (central differences), at most MAX_MAP_VOXELS."""
+    res = tuple(int(r) for r in res)
+    if len(res) != 3 or any(r < 2 for r in res):
+        raise ValueError(f"{what}: expected three integers >= 2, got {res}")
+    if int(np.prod(res, dtype=np.int64)) > MAX_MAP_VOXELS:
+        raise ValueError(f"{what}: {res} is {np.prod(res, dtype=np.int64):,} voxels, more than the "
+                         f"limit of {MAX_MAP_VOXELS:,}")
+    return res
+
+
+def quantise(values: np.ndarray, bits: int, scale: float) -> np.ndarray:
+    """Store ``values`` in [-scale, scale] at ``bits`` (8/16: unsigned normalised, 32: float)."""
+    if bits == 32 or scale == 0:
+        return values.astype(np.float32)
+    levels = 2 ** bits - 1
+    q = np.round((np.clip(values / scale, -1, 1) + 1) * 0.5 * levels)
+    return ((q / levels * 2 - 1) * scale).astype(np.float32)
+
+
+def quantise_unit(values: np.ndarray, bits: int) -> np.ndarray:
+    """Store values in [0, 1] at ``bits`` (0 and 1 stay exact)."""
+    if bits == 32:
+        return values.astype(np.float32)
+    levels = 2 ** bits - 1
+    return (np.round(np.clip(values, 0, 1) * levels) / levels).astype(np.float32)
+
+
+def _grid_points(lo, hi, res) -> tuple[mi.Point3f, np.ndarray]:
+    """Node-centred grid over [lo, hi] (z slowest): Dr.Jit points and the spacing (3,)."""
+    axes = [np.linspace(lo[i], hi[i], res[i]) for i in range(3)]
+    z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+    p = mi.Point3f(mi.Float(x.ravel()), mi.Float(y.ravel()), mi.Float(z.ravel()))
+    return p, (np.asarray(hi, float) - np.asarray(lo, float)) / (np.array(res) - 1)
+
+
+def _texture(array: np.ndarray) -> mi.Texture3f:
+    return mi.Texture3f(mi.TensorXf(np.ascontiguousarray(array, dtype=np.float32)), use_accel=False,
+                        filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
+
+
+class SampledMap:
+    """The §4.1 textures of one world-space displacement over a local box (module docstring).
+
+    Args:
+        inverse: callable(world points p') -> (world D, α exact in {0, 1}), Dr.Jit.
+        placement: local frame of the grid (:class:`maps.Placement`).
+        lo, hi: local box (3,) sampled by the grid; res: (x, y, z) nodes.
+        bits: 8, 16 or 32; smoothing: α smoothing width in voxels (0: none).
+    """
+
+    def __init__(self, inverse, placement: maps.Placement, lo, hi, res, bits=16, smoothing=1.5):
+        from scipy.ndimage import gaussian_filter
+
+        res = check_resolution(res, "D_k resolution")
+        if bits not in BITS:
+            raise ValueError(f"bits: must be one of {BITS}, got {bits!r}")
+        if not smoothing >= 0:
+            raise ValueError(f"smoothing: must be >= 0 voxels, got {smoothing!r}")
+        self.placement, self.res, self.bits, self.smoothing = placement, res, bits, smoothing
+        self.lo, self.hi = np.asarray(lo, float), np.asarray(hi, float)
+        local, h = _grid_points(self.lo, self.hi, res)
+        d, alpha = inverse(placement.to_world(local))
+        shape = (res[2], res[1], res[0])
+        d = np.stack([np.asarray(c, dtype=np.float64).reshape(shape) for c in d], axis=-1)
+        alpha = np.asarray(alpha, dtype=np.float64).reshape(shape)
+        if not np.isfinite(d).all():
+            raise ValueError("displacement map: D is not finite on its grid (check the map parameters)")
+        self.scale = float(np.abs(d).max())
+        d = quantise(d, bits, self.scale)
+        self.max_abs = np.abs(d).reshape(-1, 3).max(0)
+        if smoothing > 0 and alpha.min() < 1:
+            alpha = gaussian_filter(alpha, sigma=smoothing, mode="nearest")
+        alpha = quantise_unit(alpha, bits).astype(np.float64)
+        # J of the world map: local derivatives of world D, then d/dp' = d/dl L^-1
+        lin_inv = placement.inverse[:3, :3]
+        dl = np.stack(np.gradient(d, h[2], h[1], h[0], axis=(0, 1, 2))[::-1], axis=-1)  # (..., comp, l_axis)
+        jac = np.einsum("...ij,jk->...ik", dl, lin_inv)
+        ga_l = np.stack(np.gradient(alpha, h[2], h[1], h[0])[::-1], axis=-1)
+        galpha = np.einsum("...j,jk->...k", ga_l, lin_inv)
+        self.disp = _texture(np.concatenate([d, (1.0 - alpha)[..., None]], axis=-1))
+        self.jac = _texture(jac.reshape(*shape, 9))
+        self.galpha = _texture(galpha)
+        self.voxels = int(np.prod(res))
+        # every face of the grid holds D = 0, α = 1, J = 0 (then outside reads may be skipped)
+        faces = [d[0], d[-1], d[:, 0], d[:, -1], d[:, :, 0], d[:, :, -1]]
+        alpha_faces = [alpha[0], alpha[-1], alpha[:, 0], alpha[:, -1], alpha[:, :, 0], alpha[:, :, -1]]
+        self.bounded = all(not f.any() for f in faces) and all((f == 1).all() for f in alpha_faces) \
+            and not jac[[0, -1]].any() and not jac[:, [0, -1]].any() and not jac[:, :, [0, -1]].any()
+
+    def nbytes(self) -> int:
+        """Texture bytes at the stored bit depth (D 3 + α 1 + J 9 + ∇α 3 channels)."""
+        return self.voxels * 16 * (self.bits // 8)
+
+    def _coords(self, p: mi.Point3f) -> mi.Point3f:
+        l = self.placement.to_local(p)
+        n = mi.ScalarVector3f(self.res)
+        lo, hi = mi.ScalarPoint3f(self.lo), mi.ScalarPoint3f(self.hi)
+        return mi.Point3f((l - lo) / (hi - lo) * (n - 1) / n + 0.5 / n)
+
+    def lookup(self, p: mi.Point3f, normals: bool, active=True, alpha_gradient=True):
+        """(D, α_s, Jᵀ or None, ∇α_s or None) at world points p' (world units); lanes outside
+        ``active``, or outside a bounded grid, read nothing (D = 0, α = 1, J = 0 there)."""
+        u = self._coords(p)
+        # outside the grid (plus a node) every channel is the clamped face value: D = 0, α = 1
+        # for bounded maps, so those lanes skip the reads (masked gathers touch no memory)
+        inside = dr.all((u > -0.5 / mi.ScalarVector3f(self.res)) & (u < 1 + 0.5 / mi.ScalarVector3f(self.res)))
+        active = inside & active if self.bounded else active
+        t = self.disp.eval(u, active)
+        d, alpha = mi.Vector3f(t[0], t[1], t[2]), 1.0 - t[3]
+        if self.bounded:
+            d, alpha = dr.select(active, d, 0.0), dr.select(active, alpha, 1.0)
+        if not normals:
+            return d, alpha, None, None
+        j = self.jac.eval(u, active)
+        jac_t = mi.Matrix3f(j[0], j[3], j[6], j[1], j[4], j[7], j[2], j[5], j[8])
+        if not alpha_gradient:
+            return d, alpha, jac_t, None
+        g = self.galpha.eval(u, active)
+        return d, alpha, jac_t, mi.Vector3f(g[0], g[1], g[2])
+
+
+def padded_box(lo, hi, res, smoothing) -> tuple[np.ndarray, np.ndarray]:
+    """Grow a support box by a margin of nodes (3 smoothing widths + 1) so that the D_k's
+    faces hold D = 0, α = 1 and clamp-to-edge addressing continues them outside.  Axes with
+    too few nodes for a margin (at most a quarter of them) keep the box."""
+    lo, hi = np.asarray(lo, float).copy(), np.asarray(hi, float).copy()
+    margin = int(np.ceil(3 * smoothing)) + 1
+    for a in range(3):
+        m = min(margin, (res[a] - 2) // 4)
+        if m > 0:
+            h = (hi[a] - lo[a]) / (res[a] - 1 - 2 * m)
+            lo[a], hi[a] = lo[a] - m * h, hi[a] + m * h
+    return lo, hi
+
+
+class PlacedMap:
+    """One primitive with its parameters, D_k resolution and placement M (§6)."""
+
+    def __init__(self, kind: str, params: dict | None = None, to_world=None, resolution=None):
+        self.kind = kind
+        self.params = maps.check_params(kind, params or {})
+        self.placement = maps.Placement(to_world, what=f"{kind} to_world")
+        self.resolution = check_resolution(resolution or maps.DEFAULT_RESOLUTION[kind],
+                                           f"{kind} resolution")
+        self._sampled = None
+
+    def set(self, params: dict | None = None, to_world=None) -> None:
+        """Change parameters and/or M (animation); the D_k is rebuilt on next use."""
+        if params:
+            self.params = maps.check_params(self.kind, {**self.params, **params})
+        if to_world is not None:
+            self.placement = maps.Placement(to_world, what=f"{self.kind} to_world")
+        self._sampled = None
+
+    def exact(self, p: mi.Point3f) -> tuple[mi.Vector3f, mi.Float]:
+        """World inverse displacement M D(M⁻¹ p') and exact α at world points p'."""
+        q = {k: dr.opaque(mi.Float, v) for k, v in self.params.items()}
+        d, alpha = maps.evaluate(self.kind, q, self.placement.to_local(p))
+        return self.placement.vector_to_world(d), alpha
+
+    def support_world(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.placement.world_box(*maps.support(self.kind, self.params))
+
+    def sampled(self, bits: int, smoothing: float) -> SampledMap:
+        s = self._sampled
+        if s is None or s.bits != bits or s.smoothing != smoothing:
+            lo, hi = padded_box(*maps.support(self.kind, self.params), self.resolution, smoothing)
+            s = SampledMap(self.exact, self.placement, lo, hi, self.resolution, bits, smoothing)
+            self._sampled = s
+        return s
+
+
+class Lookup:
+    """Result of mapping world points p' through a chain: pre-image p, α (exact or α_s),
+    normal matrix B = (I + J)ᵀ of the whole chain and ∇α (None unless asked)."""
+
+    def __init__(self, p, alpha, B=None, galpha=None):
+        self.p, self.alpha, self.B, self.galpha = p, alpha, B, galpha
+
+
+class DisplacementChain:
+    """Maps in forward order, evaluated exactly or through their D_k (module docstring).
+
+    Args:
+        maps_: list of :class:`PlacedMap` (forward order: the first acts first).
+        bits: storage of every D_k; smoothing: α smoothing (voxels of each D_k).
+        composition: ``"on_the_fly"`` (one lookup per map) or ``"precomputed"`` (one D_k).
+        composite_resolution: (x, y, z) of the precomputed D_k.
+    """
+
+    COMPOSITIONS = ("on_the_fly", "precomputed")
+
+    def __init__(self, maps_, bits=16, smoothing=1.5, composition="on_the_fly",
+                 composite_resolution=(64, 64, 64)):
+        if composition not in self.COMPOSITIONS:
+            raise ValueError(f"composition: must be one of {self.COMPOSITIONS}, got {composition!r}")
+        if bits not in BITS:
+            raise ValueError(f"bits: must be one of {BITS}, got {bits!r}")
+        self.maps = list(maps_)
+        self.bits, self.smoothing, self.composition = int(bits), float(smoothing), composition
+        self.composite_resolution = check_resolution(composite_resolution, "composite_resolution")
+        self._composite = None
+        self.version = 0
+
+    def changed(self) -> None:
+        """Call after editing a map: drops the precomputed composite (and renderer caches)."""
+        self._composite = None
+        self.version += 1
+
+    def exact(self, p: mi.Point3f) -> Lookup:
+        """Pre-images through the procedural maps (reference mode) and the exact α."""
+        alpha = dr.full(mi.Float, 1.0, dr.width(p.x))
+        q = mi.Point3f(p)
+        for m in reversed(self.maps):  # eq. 9: the last map is undone first
+            d, a = m.exact(q)
+            q, alpha = q + d, alpha * a
+        return Lookup(q, alpha)
+
+    def _exact_composite(self, p):
+        r = self.exact(p)
+        return r.p - p, r.alpha
+
+    def composite(self) -> SampledMap:
+        """The precomputed D_k of the whole chain over the union of the supports."""
+        if self._composite is None:
+            boxes = [m.support_world() for m in self.maps]
+            lo, hi = padded_box(np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0),
+                                self.composite_resolution, self.smoothing)
+            self._composite = SampledMap(self._exact_composite, maps.Placement(), lo, hi,
+                                         self.composite_resolution, self.bits, self.smoothing)
+        return self._composite
+
+    def sampled_maps(self) -> list[SampledMap]:
+        """The D_k textures the approximation reads (one per map, or the composite)."""
+        if not self.maps:
+            return []
+        if self.composition == "precomputed":
+            return [self.composite()]
+        return [m.sampled(self.bits, self.smoothing) for m in self.maps]
+
+    def approximate(self, p: mi.Point3f, normals: bool = False, active=True,
+                    alpha_gradient: bool = True) -> Lookup:
+        """Pre-images through the D_k textures (approximation mode), α_s, and optionally the
+        chain's B (Matrix3f) and — unless ``alpha_gradient`` is False — ∇α_s (world units)."""
+        q = mi.Point3f(p)
+        alpha = dr.full(mi.Float, 1.0, dr.width(p.x))
+        B = dr.identity(mi.Matrix3f) if normals else None
+        galpha = mi.Vector3f(0.0) if normals and alpha_gradient else None
+        for s in reversed(self.sampled_maps()):
+            d, a, jac_t, ga = s.lookup(q, normals, active, alpha_gradient)
+            if normals:
+                # product rule for ∇(Π α) and the chain rule B <- B (I + J)ᵀ (eq. 6, 10)
+                if galpha is not None:
+                    galpha = galpha * a + alpha * (B @ ga)
+                B = B @ (dr.identity(mi.Matrix3f) + jac_t)
+            q, alpha = q + d, alpha * a
+        return Lookup(q, alpha, B, galpha)
+
+    def max_displacement(self) -> np.ndarray:
+        """Per-axis bound on |p - p'| over the chain (sum of each D_k's largest component)."""
+        total = np.zeros(3)
+        for s in self.sampled_maps():
+            total += s.max_abs
+        return total
+
+    def proxy_box(self, lo, hi) -> tuple[np.ndarray, np.ndarray]:
+        """Bounding box of the displaced object (§4.2's proxy): any p' with p = G(p') in
+        [lo, hi] lies within the summed largest displacements of it."""
+        grow = self.max_displacement()
+        return np.asarray(lo, float) - grow, np.asarray(hi, float) + grow
+
+    def nbytes(self) -> int:
+        return sum(s.nbytes() for s in self.sampled_maps())
