@@ -122,3 +122,22 @@ def constructor(plugin: str, cls: type) -> Callable[[mi.Properties], object]:
             raise ValueError(f"{plugin}: parameter {names} must be {expected}") from None
 
     return make
+
+
+def take_sensors(props: mi.Properties) -> list:
+    """Remove and return the sensors a plugin references (``<ref id="camera"/>``), to size
+    itself for them (Mitsuba's Shape would take one as its own child sensor).
+
+    Looks at every property without marking the others as used, so a misspelt parameter
+    still gets Mitsuba's "unreferenced property" error.
+    """
+    keys = []
+    for key in props.keys():
+        queried = props.was_queried(key)
+        if isinstance(props[key], mi.Sensor):
+            keys.append(key)
+        props.mark_queried(key, queried)
+    sensors = [props.get(key) for key in keys]
+    for key in keys:
+        del props[key]
+    return sensors

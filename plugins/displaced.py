@@ -46,7 +46,7 @@ from mi_displace.core import dicing, surfaces, tessellate
 from mi_displace.core.mesh_io import load_uv_mesh
 from mi_displace.core.texture_height import check_texture_finite, height_function
 from mi_displace.core.thickness import crossing_check, crossing_warning
-from mi_displace.plugins._guard import constructor
+from mi_displace.plugins._guard import constructor, take_sensors
 
 BASE_PARAMS = {
     "plane": (),
@@ -93,10 +93,7 @@ class Displaced(mi.Mesh):
     """True displacement: a tessellated mesh P = S + scale (h - midlevel) n."""
 
     def __init__(self, props: mi.Properties):
-        # sensors referenced for dicing (Mitsuba's Shape would take one as its own child)
-        self.sensors = [props.get(k) for k in props.keys() if isinstance(props.get(k), mi.Sensor)]
-        for k in [k for k in props.keys() if isinstance(props.get(k), mi.Sensor)]:
-            del props[k]
+        self.sensors = take_sensors(props)   # the sensors referenced for dicing
         base_name = props.get("base", "mesh" if "filename" in props else "sphere")
         height = props.get("height", None)
         if height is not None and not isinstance(height, mi.Texture):

@@ -32,7 +32,6 @@ D_k): ``map{i}_{parameter}`` and ``map{i}_to_world``, named as in the XML (no do
 """
 from __future__ import annotations
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 

@@ -37,7 +37,7 @@ from mi_displace.bake import formats
 from mi_displace.bake.levels import auto_levels
 from mi_displace.bake.meshdata import load_mesh
 from mi_displace.bake.restore import edge_splits, low_for_map, restore
-from mi_displace.plugins._guard import constructor
+from mi_displace.plugins._guard import constructor, take_sensors
 
 
 class Restored(mi.Mesh):
@@ -46,17 +46,7 @@ class Restored(mi.Mesh):
     def __init__(self, props: mi.Properties):
         if "map" not in props:
             raise ValueError("restored: needs a 'map' (a baked map with its .json sidecar)")
-        # sensors referenced for levels="auto" (Mitsuba's Shape would take one as its own child)
-        # (look without marking the other properties as used: typos must stay unreferenced)
-        keys = []
-        for k in props.keys():
-            queried = props.was_queried(k)
-            if isinstance(props[k], mi.Sensor):
-                keys.append(k)
-            props.mark_queried(k, queried)
-        self.sensors = [props.get(k) for k in keys]
-        for k in keys:
-            del props[k]
+        self.sensors = take_sensors(props)   # the sensors referenced for levels="auto"
         resolver = mi.file_resolver()   # paths relative to the scene file
         self.map_path = str(resolver.resolve(str(props.get("map"))))
         low = str(resolver.resolve(str(props.get("low")))) if "low" in props else low_for_map(self.map_path)

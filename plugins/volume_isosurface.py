@@ -14,7 +14,6 @@ surface reference of the slicing renderer's ``surface`` model.
 import time
 
 import mitsuba as mi
-import numpy as np
 
 from mi_displace.volume.isosurface import isosurface
 

@@ -31,7 +31,6 @@ from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
 from mi_displace.evaluate import metrics
 from mi_displace.render import scene as scenes

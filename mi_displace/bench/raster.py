@@ -34,10 +34,8 @@ import importlib
 import json as _json
 import os
 import shutil
-import statistics
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import drjit as dr

@@ -27,7 +27,6 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.volume import maps
-from mi_displace.volume.objects import MAX_VOXELS
 
 BITS = (8, 16, 32)
 #: Most voxels of one D_k (refused before anything is allocated).

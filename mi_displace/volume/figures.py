@@ -16,10 +16,8 @@ from __future__ import annotations
 
 import json
 import statistics
-import time
 from pathlib import Path
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 
