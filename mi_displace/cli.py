@@ -42,6 +42,7 @@ SUMMARY_COLUMNS = (
 COMMAND_MODULES = [
     "mi_displace.ddm.cli",
     "mi_displace.bake.cli",
+    "mi_displace.inverse.cli",
 ]
 
 
