@@ -332,6 +332,7 @@ class Displaced(mi.Mesh):
         own = {"scale", "midlevel", "dicing_rate", "offscreen_dicing_scale"}
         texture = any(k == "height" or k.startswith("height.") for k in keys)
         if own & set(keys) or texture:
+            self._refuse_gradients_that_cannot_flow()
             for key in ("scale", "midlevel"):
                 if not math.isfinite(float(dr.detach(getattr(self, key))[0])):
                     raise ValueError(f"displaced: '{key}' must be finite")
@@ -348,6 +349,21 @@ class Displaced(mi.Mesh):
                 self._upload(t, start, stats)
         else:
             super().parameters_changed(keys)
+
+    def _refuse_gradients_that_cannot_flow(self) -> None:
+        """ValueError naming a parameter whose gradient would silently stay zero."""
+        names = [k for k in ("dicing_rate", "offscreen_dicing_scale")
+                 if self.dicing and dr.grad_enabled(getattr(self, k))]
+        if self.height_texture is not None:
+            params = mi.traverse(self.height_texture)
+            names += [f"height.{k}" for k in params.keys()
+                      if params.flags(k) & mi.ParamFlags.NonDifferentiable
+                      and dr.is_array_v(params[k]) and dr.grad_enabled(params[k])]
+        if names:
+            raise ValueError(f"displaced {self.id()!r}: a gradient was enabled on "
+                             f"{', '.join(map(repr, names))}, which the tessellation cannot "
+                             "differentiate (it would stay exactly zero); differentiable: "
+                             "'scale', 'midlevel' and the height texture's data")
 
     def to_string(self):
         s = self.build_stats

@@ -19,8 +19,8 @@ def scene(integrator, height, **shape):
             "film": {"type": "hdrfilm", "width": 32, "height": 32, "rfilter": {"type": "box"}},
             "sampler": {"type": "independent", "sample_count": SPP}},
         "light": {"type": "point", "position": [2, -3, 2], "intensity": {"type": "rgb", "value": 20}},
-        "ball": {"type": "displaced", "base": "sphere", "resolution": 48, "scale": 0.1,
-                 "midlevel": 0.5, "height": height, **shape}})
+        "ball": {"type": "displaced", "scale": 0.1, "midlevel": 0.5, "height": height,
+                 **(shape or {"base": "sphere", "resolution": 48})}})
 
 
 def grad_and_fd(sc, key, target_value, eps, direction=None):
@@ -68,21 +68,23 @@ def test_scale_and_midlevel_gradients_match_finite_differences(variant, integrat
 
 
 def test_bitmap_texel_gradient_matches_finite_differences(variant, tmp_path):
-    v, u = np.meshgrid((np.arange(128) + 0.5) / 128, (np.arange(256) + 0.5) / 256, indexing="ij")
-    h = (0.5 + 0.4 * np.sin(2 * np.pi * 2 * u) * np.sin(np.pi * 2 * v))[..., None].astype(np.float32)
-    mi.Bitmap(h).write(str(tmp_path / "h.exr"))
+    """The ripples pattern stored as a 512 x 256 bitmap; d/dt L(h + t) (a uniform lift of every
+    texel) against central differences."""
+    v, u = np.meshgrid((np.arange(256) + 0.5) / 256, (np.arange(512) + 0.5) / 512, indexing="ij")
+    si = dr.zeros(mi.SurfaceInteraction3f, u.size)
+    si.uv = mi.Point2f(mi.Float(u.ravel()), mi.Float(v.ravel()))
+    h = np.asarray(mi.load_dict({"type": "ripples"}).eval_1(si)).reshape(256, 512, 1)
+    mi.Bitmap(h.astype(np.float32)).write(str(tmp_path / "h.exr"))
     sc = scene("direct_projective", {"type": "bitmap", "filename": str(tmp_path / "h.exr"),
                                      "raw": True})
     key = "ball.height.data"
     assert key in mi.traverse(sc) and not mi.traverse(sc).flags(key) & mi.ParamFlags.NonDifferentiable
-    target = mi.TensorXf(np.clip(h + 0.3, 0, 1))
-    direction = mi.TensorXf(np.ones_like(h))   # d/dt L(h + t): a uniform lift of every texel
+    target = mi.TensorXf(np.clip(h - 0.2, 0, 1).astype(np.float32))
+    direction = mi.TensorXf(np.ones_like(h, dtype=np.float32))
     ad, fd = grad_and_fd(sc, key, target, 0.1, direction)
     print(f"bitmap lift: AD {ad:.6g}, FD {fd:.6g}")
     assert np.sign(ad) == np.sign(fd) and abs(fd) > 1e-5
-    # measured 22 % (AD above FD), also for midlevel on this bitmap scene (ripples: 5 %);
-    # not understood yet (docs/displaced.md): checked for sign and rough size only
-    assert abs(ad - fd) <= 0.3 * abs(fd), (ad, fd)
+    assert abs(ad - fd) <= 0.15 * abs(fd), (ad, fd)
 
 
 def test_texture_edits_redisplace_like_a_fresh_load(variant, tmp_path):
@@ -98,3 +100,39 @@ def test_texture_edits_redisplace_like_a_fresh_load(variant, tmp_path):
     a = np.asarray(mi.traverse(edited)["vertex_positions"])
     b = np.asarray(mi.traverse(fresh)["vertex_positions"])
     assert np.abs(a - b).max() < 1e-6
+
+
+def test_scale_gradient_on_a_mesh_base(variant, tmp_path):
+    """The same check on a mesh base (icosphere with spherical UVs, subdivided 3x)."""
+    import trimesh
+
+    ico = trimesh.creation.icosphere(3)
+    p = ico.vertices
+    uv = np.stack([np.arctan2(p[:, 1], p[:, 0]) / (2 * np.pi) + 0.5,
+                   np.arccos(np.clip(p[:, 2], -1, 1)) / np.pi], 1)
+    ico.visual = trimesh.visual.TextureVisuals(uv=uv)
+    ico.export(tmp_path / "ico.ply")
+    sc = scene("direct_projective", {"type": "ripples", "frequency": 2.0},
+               base="mesh", filename=str(tmp_path / "ico.ply"), subdivision=3)
+    ad, fd = grad_and_fd(sc, "ball.scale", 0.15, 0.008)
+    print(f"mesh scale: AD {ad:.6g}, FD {fd:.6g}")
+    assert np.sign(ad) == np.sign(fd) and abs(fd) > 1e-5
+    assert abs(ad - fd) <= 0.15 * abs(fd), (ad, fd)
+
+
+@pytest.mark.parametrize("key,props", [
+    ("ball.height.phase", {}),
+    ("ball.dicing_rate", {"dicing_rate": 2.0}),
+])
+def test_gradient_on_a_parameter_that_cannot_have_one_is_refused(variant, key, props):
+    sensor = {"type": "perspective", "film": {"type": "hdrfilm", "width": 16, "height": 16},
+              "to_world": mi.ScalarTransform4f().look_at(origin=[0, -4, 0], target=[0, 0, 0], up=[0, 0, 1])}
+    shape = {"type": "displaced", "base": "sphere", "height": {"type": "ripples"}, **props}
+    if not props:
+        shape["resolution"] = 16
+    sc = mi.load_dict({"type": "scene", "cam": sensor,
+                       "ball": {**shape, **({"r": {"type": "ref", "id": "cam"}} if props else {})}})
+    params = mi.traverse(sc)
+    dr.enable_grad(params[key])
+    with pytest.raises(ValueError, match=key.split(".", 1)[1].replace(".", r"\.")):
+        params.update()
