@@ -7,8 +7,11 @@ from pathlib import Path
 import numpy as np
 
 
-def write(rec, out: Path) -> None:
-    """``out/recovery.json``, ``out/recovery_curves.png``, ``out/recovery_maps.png``."""
+def write(rec, out: Path, truth_label: str = "truth", error_label: str = "height RMS / range",
+          extra: dict | None = None) -> None:
+    """``out/recovery.json`` (with ``extra`` merged in), ``out/recovery_curves.png``,
+    ``out/recovery_maps.png``; ``truth_label`` / ``error_label`` name the comparison map and
+    the error curve."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -18,7 +21,8 @@ def write(rec, out: Path) -> None:
         if not np.all(np.isfinite(values)):
             raise FloatingPointError(f"recovery {name} holds NaN/Inf")
     (out / "recovery.json").write_text(json.dumps(
-        {"summary": rec.summary(), "loss": rec.loss, "rms": rec.rms, "seconds": rec.seconds},
+        {"summary": rec.summary(), "loss": rec.loss, "rms": rec.rms, "seconds": rec.seconds,
+         **(extra or {})},
         indent=2))
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.4))
@@ -28,7 +32,7 @@ def write(rec, out: Path) -> None:
         a.axhline(floor, ls="--", c="grey", label="noise floor (true map)")
     a.set_xlabel("iteration"), a.legend()
     b.plot(rec.rms, c="C1")
-    b.set_xlabel("iteration"), b.set_ylabel("height RMS / range"), b.set_ylim(0, None)
+    b.set_xlabel("iteration"), b.set_ylabel(error_label), b.set_ylim(0, None)
     s = rec.settings
     fig.suptitle(f"{s['integrator']}: {s['map_size']}² map, {s['views']} views x {s['lights']} "
                  f"lights, {s['image_size']}² images, {s['spp']} spp")
@@ -40,12 +44,12 @@ def write(rec, out: Path) -> None:
     lo, hi = float(rec.truth.min()), float(rec.truth.max())
     start = np.full_like(rec.truth, 0.5)
     for ax, img, title in zip(axes, (start, rec.estimate, rec.truth),
-                              ("start (flat)", f"recovered (RMS {rec.rms[-1]:.3f})", "truth")):
+                              ("start (flat)", f"recovered (error {rec.rms[-1]:.3f})", truth_label)):
         ax.imshow(img, cmap="gray", vmin=lo, vmax=hi)
         ax.set_title(title), ax.axis("off")
     err = axes[3].imshow(rec.estimate - rec.truth, cmap="coolwarm", vmin=-(hi - lo) / 2,
                          vmax=(hi - lo) / 2)
-    axes[3].set_title("recovered - truth"), axes[3].axis("off")
+    axes[3].set_title(f"recovered - {truth_label.split()[0]}"), axes[3].axis("off")
     fig.colorbar(err, ax=axes[3], fraction=0.046)
     fig.tight_layout()
     fig.savefig(out / "recovery_maps.png", dpi=100)

@@ -77,25 +77,36 @@ def scene_dict(height: np.ndarray, views: int = 3, image_size: int = 64, spp: in
     stereo).  ``resolution``: tessellation cells per side (default 2 per texel)."""
     n = height.shape[0]
     resolution = 2 * n if resolution is None else resolution
-    # sppi 0: a plane under a directional light has no indirect silhouettes to sample
+    surface = {"type": "displaced", "base": "plane", "resolution": int(resolution),
+               "scale": float(scale), "midlevel": 0.5, "height": bitmap_height(height)}
+    origins = view_origins(views, 55.0 if grazing_deg is None else grazing_deg)
+    return lit_scene(surface, integrator, LIGHTS[light], origins, [0, 0, 0], [0, 0, 1],
+                     34, image_size, spp)
+
+
+def bitmap_height(height: np.ndarray) -> dict:
+    """A raw, bilinear, clamped ``bitmap`` texture over ``height`` (float (n, m))."""
+    return {"type": "bitmap", "raw": True, "filter_type": "bilinear", "wrap_mode": "clamp",
+            "bitmap": mi.Bitmap(np.ascontiguousarray(np.asarray(height)[..., None], np.float32))}
+
+
+def lit_scene(surface: dict, integrator: str, light_direction, origins, target, up,
+              fov: float, image_size: int, spp: int, albedo: float = 0.7) -> dict:
+    """Scene dict: ``surface`` (diffuse ``albedo``) under one directional light (irradiance 2),
+    one perspective camera per origin (``sensor0``...) looking at ``target``."""
+    # sppi 0: under a directional light the indirect silhouettes carry next to nothing
     integ = {"type": integrator, "sppi": 0}
     if integrator != "direct_projective":
         integ["max_depth"] = 2
     d = {"type": "scene", "integrator": integ,
-         "light": {"type": "directional", "direction": LIGHTS[light],
+         "light": {"type": "directional", "direction": list(light_direction),
                    "irradiance": {"type": "rgb", "value": 2.0}},
-         "surface": {"type": "displaced", "base": "plane", "resolution": int(resolution),
-                     "scale": float(scale), "midlevel": 0.5,
-                     "height": {"type": "bitmap", "raw": True, "filter_type": "bilinear",
-                                "wrap_mode": "clamp",
-                                "bitmap": mi.Bitmap(np.ascontiguousarray(height[..., None],
-                                                                         np.float32))},
-                     "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.7}}}}
-    origins = view_origins(views, 55.0 if grazing_deg is None else grazing_deg)
+         "surface": {**surface, "bsdf": {"type": "diffuse",
+                                         "reflectance": {"type": "rgb", "value": albedo}}}}
     for i, o in enumerate(origins):
         d[f"sensor{i}"] = {
-            "type": "perspective", "fov": 34,
-            "to_world": mi.ScalarTransform4f().look_at(origin=o, target=[0, 0, 0], up=[0, 0, 1]),
+            "type": "perspective", "fov": fov,
+            "to_world": mi.ScalarTransform4f().look_at(origin=o, target=target, up=up),
             "film": {"type": "hdrfilm", "width": image_size, "height": image_size,
                      "rfilter": {"type": "box"}, "pixel_format": "rgb",
                      "sample_border": True},
@@ -145,6 +156,42 @@ def image_loss(scenes, param_sets, targets, views: int, spp: int, seed: int):
     return loss / j
 
 
+def optimise(scenes, targets, key: str, start: np.ndarray, iterations: int, views: int,
+             spp: int, learning_rate: float, seed: int, error, log=None) -> dict:
+    """Adam on the texels ``key`` (shared by every scene in ``scenes``) from ``start``
+    (float (n, m)), clamped to [0, 1] after each step.
+
+    ``error(texels (n, m)) -> float``: the height error logged before each step and after
+    the last.  Returns {estimate, loss, rms, seconds} (lists per iteration)."""
+    param_sets = [mi.traverse(sc) for sc in scenes]
+    opt = mi.ad.Adam(lr=learning_rate)
+    opt[key] = mi.TensorXf(np.asarray(start, np.float32)[..., None])
+    for params in param_sets:   # every scene displaces from the same optimised texels
+        params.update(opt)
+    out = {"loss": [], "rms": [], "seconds": []}
+    for it in range(iterations):
+        clock = time.perf_counter()
+        out["rms"].append(error(np.asarray(opt[key])[..., 0]))
+        # one backward over every render: they share the texels' graph to the vertices
+        loss = image_loss(scenes, param_sets, targets, views, spp, seed + 7919 * it)
+        dr.backward(loss)
+        total = float(loss.array[0])
+        if not math.isfinite(total):
+            raise FloatingPointError(f"recover: image loss is {total} at iteration {it}")
+        opt.step()
+        opt[key] = dr.clip(opt[key], 0.0, 1.0)
+        for params in param_sets:
+            params.update(opt)
+        out["loss"].append(total)
+        out["seconds"].append(time.perf_counter() - clock)
+        if log:
+            log(f"iteration {it:3d}: loss {total:.4e}  height error {out['rms'][-1]:.4f}  "
+                f"{out['seconds'][-1]:.2f} s")
+    out["estimate"] = np.asarray(opt[key])[..., 0].copy()
+    out["rms"].append(error(out["estimate"]))
+    return out
+
+
 def recover(truth: np.ndarray, iterations: int = 40, views: int = 3, lights: int = 2,
             image_size: int = 64, spp: int = 8, target_spp: int = 128,
             integrator: str = "prb_projective", learning_rate: float = 0.05,
@@ -166,36 +213,15 @@ def recover(truth: np.ndarray, iterations: int = 40, views: int = 3, lights: int
     scenes = [mi.load_dict(scene_dict(truth, views, image_size, spp, integrator, scale=scale,
                                       light=k)) for k in range(lights)]
     targets = render_targets(scenes, views, target_spp)
-    param_sets = [mi.traverse(sc) for sc in scenes]
-    opt = mi.ad.Adam(lr=learning_rate)
-    opt[KEY] = mi.TensorXf(np.full(truth.shape + (1,), 0.5, np.float32))
-    for params in param_sets:   # every scene displaces from the same optimised texels
-        params.update(opt)
-    rec = Recovery(truth, np.asarray(opt[KEY])[..., 0].copy(), settings=dict(
+    faces = int(mi.traverse(scenes[0])["surface.faces"].shape[0] // 3)
+    run = optimise(scenes, targets, KEY, np.full_like(truth, 0.5), iterations, views, spp,
+                   learning_rate, seed, lambda h: height_rms(h, truth), log)
+    rec = Recovery(truth, run["estimate"], run["loss"], run["rms"], run["seconds"], settings=dict(
         map_size=truth.shape[0], views=views, lights=lights, image_size=image_size, spp=spp,
         target_spp=target_spp, integrator=integrator, learning_rate=learning_rate,
-        scale=scale, faces=int(param_sets[0]["surface.faces"].shape[0] // 3)))
-    for it in range(iterations):
-        clock = time.perf_counter()
-        rec.rms.append(height_rms(np.asarray(opt[KEY])[..., 0], truth))
-        # one backward over every render: they share the texels' graph to the vertices
-        loss = image_loss(scenes, param_sets, targets, views, spp, seed + 7919 * it)
-        dr.backward(loss)
-        total = float(loss.array[0])
-        if not math.isfinite(total):
-            raise FloatingPointError(f"recover: image loss is {total} at iteration {it}")
-        opt.step()
-        opt[KEY] = dr.clip(opt[KEY], 0.0, 1.0)
-        for params in param_sets:
-            params.update(opt)
-        rec.loss.append(total)
-        rec.seconds.append(time.perf_counter() - clock)
-        if log:
-            log(f"iteration {it:3d}: loss {total:.4e}  height RMS {rec.rms[-1]:.4f}  "
-                f"{rec.seconds[-1]:.2f} s")
-    rec.estimate = np.asarray(opt[KEY])[..., 0].copy()
-    rec.rms.append(height_rms(rec.estimate, truth))
+        scale=scale, faces=faces))
     # the loss floor: the true map rendered at ``spp`` against the targets (noise alone)
+    param_sets = [mi.traverse(sc) for sc in scenes]
     for params in param_sets:
         params[KEY] = mi.TensorXf(truth[..., None])
         params.update()
