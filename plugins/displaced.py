@@ -272,9 +272,11 @@ class Displaced(mi.Mesh):
         v, f = t.vertex_count, t.face_count
         tessellate_s = time.perf_counter() - start
         check = (crossing_check(t, thickness=self.base.thickness()) if self.base is not None
-                 else crossing_check(t, base_mesh=(self.mesh_data[0], self.mesh_data[3])))
+                 else crossing_check(t, base_mesh=(self.mesh_data[0], self.mesh_data[3],
+                                                   self.mesh_data[2]),
+                                     other_side=self._signed_displacement()))
         messages = list(stats.pop("warnings", []))
-        message = crossing_warning(f"displaced {self.id()!r}", check)
+        message = crossing_warning(f"displaced {self.id() or '(no id)'!r}", check)
         if message:
             messages.append(message)
         for m in messages:
@@ -283,6 +285,13 @@ class Displaced(mi.Mesh):
                             "bytes": v * 8 * 4 + f * 3 * 4,
                             "crossing_vertices": check["crossing_vertices"],
                             "warnings": messages}
+
+    def _signed_displacement(self):
+        """callable(uv) -> scale (h(uv) - midlevel), or None without a height."""
+        if self.height_texture is None:
+            return None
+        height = height_function(self.height_texture, 1e-3)
+        return lambda uv: self.scale * (height(uv)[0] - self.midlevel)
 
     def redice_for(self, sensors) -> bool:
         """Dice for ``sensors`` (the scene's) unless the shape references its own; True if

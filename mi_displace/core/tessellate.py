@@ -395,9 +395,13 @@ def displace_mesh_vertices(positions, normals, uvs, faces, src: np.ndarray, bary
                    gather(cls, arr, idx[0]) * wts[0])
 
     base_p = mi.Point3f(interp(positions))
-    n = dr.normalize(interp(normals))
     uv = mi.Point2f(interp(uvs))
     s_u, s_v, n_u, n_v = (interp(a) for a in vertex_frames(positions, normals, uvs, faces))
+    # between vertex normals that cancel (a crease whose sides share vertices) fall back to
+    # the tangent frame's normal, else +z: never a NaN
+    n_raw, frame = interp(normals), dr.cross(s_u, s_v)
+    n = dr.normalize(dr.select(dr.squared_norm(n_raw) > 1e-12, n_raw, dr.select(
+        dr.squared_norm(frame) > 0, frame, mi.Vector3f(0, 0, 1))))
     groups = mi.UInt32(np.ascontiguousarray(group, np.uint32))
     n_groups = int(group.max()) + 1
     p, disp, grad = base_p, None, None

@@ -207,3 +207,14 @@ def test_mesh_normals_converge_to_the_displaced_smooth_surface(variant):
     # a facet of the 16-gon alone would be off by up to 11 degrees
     assert errors[0] < 0.5 and errors[-1] < 0.1, errors
     assert errors[1] < errors[0] / 1.5 and errors[2] < errors[1] / 1.5, errors
+
+
+def test_mesh_crease_with_cancelling_vertex_normals_stays_finite(variant):
+    """Two triangles whose shared edge carries opposite vertex normals (a shell's rim that
+    shares the walls' vertices): the interpolated normal is zero at the edge's midpoint."""
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float)
+    nrm = np.array([[0, 0, 1], [0, 0, -1], [0, 0, 1], [0, 0, -1]], float)
+    uvs = pos[:, :2]
+    faces = np.array([[0, 1, 2], [1, 3, 2]])
+    t = tessellate.displace_mesh(pos, nrm, uvs, faces, ripple, 0.05, 0.5, 4)
+    assert np.all(np.isfinite(np.asarray(t.positions))) and np.all(np.isfinite(np.asarray(t.normals)))

@@ -59,3 +59,16 @@ def test_parametric_bases_use_their_analytic_thickness(variant):
     assert crossing_check(t, thickness=torus.thickness())["crossing_vertices"] == t.vertex_count
     t = tessellate.displace_parametric(torus, constant(0.0), 0.1, 1.0, 32, 16)
     assert crossing_check(t, thickness=torus.thickness())["crossing_vertices"] == 0
+
+
+def test_both_walls_moving_towards_each_other_cross(variant):
+    """Each wall moves 0.01 inwards (less than the 0.015 wall): alone harmless, together they
+    meet; counted once the other side's displacement is known."""
+    pos, nrm, uvs, faces = shell_mesh()
+    t = tessellate.displace_mesh(pos, nrm, uvs, faces, constant(0.0), 0.01, 1.0, 2)
+    alone = crossing_check(t, base_mesh=(pos, faces))
+    both = crossing_check(t, base_mesh=(pos, faces, uvs),
+                          other_side=lambda uv: dr.full(mi.Float, -0.01, dr.width(uv)))
+    assert alone["crossing_vertices"] == 0
+    assert both["crossing_vertices"] > 0.95 * t.vertex_count
+    assert both["max_depth_ratio"] == pytest.approx(0.02 / WALL, rel=0.1)
