@@ -56,6 +56,7 @@ COMMAND_MODULES = [
     "mi_displace.evaluate.cli",
     "mi_displace.slicing.cli",
     "mi_displace.volume.cli",
+    "mi_displace.inverse.cli",
 ]
 
 

@@ -1,0 +1,1 @@
+"""Inverse displacement (issue 14): height maps recovered from images by differentiable rendering."""
