@@ -29,6 +29,7 @@ from mi_displace.plugins.slicing import SlicingBSDF, _slice_count
 from mi_displace.plugins.vdm import nested_objects
 from mi_displace.slicing import depth_object as dobj
 from mi_displace.vdm.frame import shading_interaction
+from mi_displace.plugins._guard import constructor
 
 
 class ViewColour(mi.Texture):
@@ -139,5 +140,5 @@ class VisualHullShape(DepthObjectShape):
 
 
 def register():
-    mi.register_shape("depth_object", lambda props: DepthObjectShape(props))
-    mi.register_shape("visual_hull", lambda props: VisualHullShape(props))
+    mi.register_shape("depth_object", constructor("depth_object", DepthObjectShape))
+    mi.register_shape("visual_hull", constructor("visual_hull", VisualHullShape))

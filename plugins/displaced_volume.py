@@ -39,6 +39,7 @@ from mi_displace.volume import maps as primitives
 from mi_displace.volume.displacement import DisplacementChain, PlacedMap
 from mi_displace.volume.field import DisplacedVolume
 from mi_displace.volume.objects import load_raw, load_vol, piggy_bank
+from mi_displace.plugins._guard import constructor
 
 MAX_MAPS = 32
 
@@ -173,4 +174,4 @@ class DisplacedVolumePlugin(mi.Volume):
 
 
 def register():
-    mi.register_texture("displaced_volume", lambda props: DisplacedVolumePlugin(props))
+    mi.register_texture("displaced_volume", constructor("displaced_volume", DisplacedVolumePlugin))

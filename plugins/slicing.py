@@ -41,6 +41,7 @@ from mi_displace.plugins.vdm import MesostructureBSDF, nested_objects
 from mi_displace.slicing import geometry as geo
 from mi_displace.slicing.sliced import DIRECTIONS, SlicedVolume
 from mi_displace.vdm.frame import shading_interaction
+from mi_displace.plugins._guard import constructor
 
 
 class SlicingBSDF(MesostructureBSDF):
@@ -187,4 +188,4 @@ class Slicing(mi.Mesh):
 
 
 def register():
-    mi.register_shape("slicing", lambda props: Slicing(props))
+    mi.register_shape("slicing", constructor("slicing", Slicing))

@@ -16,6 +16,7 @@ import time
 import mitsuba as mi
 
 from mi_displace.volume.isosurface import isosurface
+from mi_displace.plugins._guard import constructor
 
 
 class VolumeIsosurface(mi.Mesh):
@@ -36,4 +37,4 @@ class VolumeIsosurface(mi.Mesh):
 
 
 def register():
-    mi.register_shape("volume_isosurface", lambda props: VolumeIsosurface(props))
+    mi.register_shape("volume_isosurface", constructor("volume_isosurface", VolumeIsosurface))

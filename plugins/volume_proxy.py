@@ -18,6 +18,8 @@ the two agree.  So the volume scenes use this shape instead of a hand-sized ``cu
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.plugins._guard import constructor
+
 CORNERS = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], dtype=np.float32)
 # two outward-facing triangles per face of the unit cube (corner index = x + 2 y + 4 z)
 FACES = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
@@ -38,4 +40,4 @@ class VolumeProxy(mi.Mesh):
 
 
 def register():
-    mi.register_shape("volume_proxy", lambda props: VolumeProxy(props))
+    mi.register_shape("volume_proxy", constructor("volume_proxy", VolumeProxy))

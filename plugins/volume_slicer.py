@@ -23,6 +23,7 @@ method.  ``mi.render`` returns a (height, width, 3) image; ``spp`` and ``seed`` 
 import mitsuba as mi
 
 from mi_displace.volume import slicing
+from mi_displace.plugins._guard import constructor
 
 
 class VolumeSlicer(mi.SamplingIntegrator):
@@ -55,4 +56,4 @@ class VolumeSlicer(mi.SamplingIntegrator):
 
 
 def register():
-    mi.register_integrator("volume_slicer", lambda props: VolumeSlicer(props))
+    mi.register_integrator("volume_slicer", constructor("volume_slicer", VolumeSlicer))

@@ -88,6 +88,33 @@ def _raster(extra):
     return lambda tmp, n: {"type": "raster", **extra(tmp)}
 
 
+def _slicing(extra):
+    return lambda tmp, n: {"type": "slicing", "base": "plane", "slices": 4, "height": n["cells"],
+                           **extra(tmp)}
+
+
+CUP_IMAGES = BUNNY_MAP.parents[1] / "slicing_cup_depth" / "cube.json"
+
+
+def _depth_object(extra):
+    return lambda tmp, n: {"type": "depth_object", "filename": str(CUP_IMAGES), "slices": 8,
+                           **extra(tmp)}
+
+
+PIGGY = {"type": "displaced_volume", "procedural": "piggy_bank", "resolution": 16}
+
+
+def _volume(extra, procedural=True):
+    base = dict(PIGGY) if procedural else {"type": "displaced_volume"}
+    return lambda tmp, n: {**base, **extra(tmp)}
+
+
+def _of_volume(kind, extra):
+    return lambda tmp, n: {"type": kind, "volume": dict(PIGGY), **extra(tmp)}
+
+
+
+
 CASES = {
     "displaced": {
         "misspelt": (_displaced(lambda t: {"scael": 0.1}), "scael"),
@@ -142,6 +169,47 @@ CASES = {
         "misspelt": (_raster(lambda t: {"max_layer": 4}), "max_layer"),
         "wrong_type": (_raster(lambda t: {"aa": "two"}), "aa"),
         "non_finite": (_raster(lambda t: {"aa": NAN}), "aa"),
+    },
+    "slicing": {
+        "misspelt": (_slicing(lambda t: {"slcies": 4}), "slcies"),
+        "wrong_type": (_slicing(lambda t: {"slices": "many"}), "slices"),
+        "non_finite": (_slicing(lambda t: {"scale": NAN}), "scale"),
+        "missing_file": (_slicing(lambda t: {"base": "mesh", "filename": _missing(t, ".obj")}),
+                         "no_such_file.obj"),
+        "garbage_file": (_slicing(lambda t: {"base": "mesh", "filename": _garbage(t, ".obj")}),
+                         "garbage.obj"),
+    },
+    "depth_object": {
+        "misspelt": (_depth_object(lambda t: {"slcies": 8}), "slcies"),
+        "wrong_type": (_depth_object(lambda t: {"slices": "many"}), "slices"),
+        "non_finite": (_depth_object(lambda t: {"slices": NAN}), "slices"),
+        "missing_file": (_depth_object(lambda t: {"filename": _missing(t, ".json")}),
+                         "no_such_file.json"),
+        "garbage_file": (_depth_object(lambda t: {"filename": _garbage(t, ".json")}),
+                         "garbage.json"),
+    },
+    "displaced_volume": {
+        "misspelt": (_volume(lambda t: {"densty_scale": 2.0}), "densty_scale"),
+        "wrong_type": (_volume(lambda t: {"bits": "many"}), "bits"),
+        "non_finite": (_volume(lambda t: {"density_scale": NAN}), "density_scale"),
+        "missing_file": (_volume(lambda t: {"filename": _missing(t, ".raw")}, procedural=False),
+                         "no_such_file.raw"),
+        "garbage_file": (_volume(lambda t: {"filename": _garbage(t, ".vol")}, procedural=False),
+                         "garbage.vol"),
+    },
+    "volume_slicer": {
+        "misspelt": (_of_volume("volume_slicer", lambda t: {"spaceing": 1.0}), "spaceing"),
+        "wrong_type": (_of_volume("volume_slicer", lambda t: {"spacing": "big"}), "spacing"),
+        "non_finite": (_of_volume("volume_slicer", lambda t: {"spacing": NAN}), "spacing"),
+    },
+    "volume_isosurface": {
+        "misspelt": (_of_volume("volume_isosurface", lambda t: {"isso": 0.5}), "isso"),
+        "wrong_type": (_of_volume("volume_isosurface", lambda t: {"iso": "half"}), "iso"),
+        "non_finite": (_of_volume("volume_isosurface", lambda t: {"iso": NAN}), "iso"),
+    },
+    "volume_proxy": {
+        "misspelt": (_of_volume("volume_proxy", lambda t: {"volumee": 1.0}), "volumee"),
+        "wrong_type": (_of_volume("volume_proxy", lambda t: {"volume": 3.0}), "volume"),
     },
     "ripples": {
         "misspelt": (_texture("ripples", lambda t: {"frequncy": 4.0}), "frequncy"),
