@@ -9,7 +9,7 @@ twice and displaced along its normals by a procedural relief, and the **Stanford
 (69,451 faces, holes at the bottom).  Each low-poly is made by ``bake()`` itself (Taubin
 smoothing, fast-simplification, xatlas UVs) and written to ``low.obj``; Blender imports that
 file (same UVs, same vertex normals) and the high-poly, and bakes with the same search
-distance (:mod:`mi_displace.bench.blender_side`).
+distance (:mod:`mi_displace.bench._blender_side`).
 
 Compared per texel where both bakers measured the high-poly:
 
@@ -83,7 +83,7 @@ def compare_pair(high, res: int, out: Path, blender_python: str, target_faces: i
     r = bake(out / "high.obj", out / "ours" / "low.obj", res=res, map_formats=["float"],
              max_distance=first.record["settings"]["max_distance"])
     dist = r.record["settings"]["max_distance"]
-    subprocess.run([blender_python, str(Path(__file__).with_name("blender_side.py")),
+    subprocess.run([blender_python, str(Path(__file__).with_name("_blender_side.py")),
                     str(out / "high.obj"), str(out / "ours" / "low.obj"), str(res), repr(dist),
                     str(out)], check=True, capture_output=True)
     b = {name: np.load(out / f"{name}.npy") for name in

@@ -2,7 +2,7 @@
 
 Run by a Python that has ``bpy`` (Blender as a module), not by mi_displace's own::
 
-    python blender_side.py HIGH.obj LOW.obj RES MAX_DISTANCE OUT_DIR
+    python _blender_side.py HIGH.obj LOW.obj RES MAX_DISTANCE OUT_DIR
 
 Imports both OBJs without axis conversion (object coordinates unchanged; the low-poly keeps
 the normals written in its ``vn`` lines as custom normals, the high-poly is smooth-shaded),
