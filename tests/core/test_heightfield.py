@@ -187,3 +187,40 @@ def test_bad_to_uv(hf):
         hf.uv_affine(np.full((3, 3), np.nan))
     with pytest.raises(ValueError, match="unknown height pattern"):
         hf.evaluate("waves", mi.Point2f(0.5, 0.5))
+
+
+# -- mutants that survived the tests above (docs/testing.md, mutation testing) ---------------
+
+
+@pytest.mark.parametrize("name, params, message", [
+    ("ripples", dict(frequency="x"), "ripples: parameter 'frequency' must be a number, got 'x'"),
+    ("ripples", dict(frequency=0), "ripples: parameter 'frequency' must be finite and in (0, inf), got 0"),
+    ("ripples", dict(phase=math.inf), "ripples: parameter 'phase' must be finite and in (-inf, inf), got inf"),
+    ("ripples", dict(frequency=(1, 2, 3)),
+     "ripples: parameter 'frequency' must be a number or a (u, v) pair, got (1, 2, 3)"),
+    ("bricks", dict(mortar=0.5), "bricks: parameter 'mortar' must be finite and in [0, 0.5), got 0.5"),
+    ("bricks", dict(rows=2.5), "bricks: parameter 'rows' must be an integer, got 2.5"),
+    ("cells", dict(radius=1.5), "cells: parameter 'radius' must be finite and in (0, 1], got 1.5"),
+    ("cells", dict(cells=(1 << 15) + 1),
+     "cells: parameter 'cells' must be finite and in [1, 32768], got 32769"),
+])
+def test_bad_parameter_messages_are_exact(hf, name, params, message):
+    """The whole message: pattern, parameter, the allowed interval with its open/closed ends."""
+    with pytest.raises(ValueError) as caught:
+        hf.PATTERNS[name][0](mi.Point2f(0.5, 0.5), **params)
+    assert str(caught.value) == message
+
+
+def test_cell_count_limit_is_the_32_bit_key_bound(hf):
+    """Cell keys i + n j with n = 2^15 cells stay below 2^31: the largest count accepted."""
+    h, _ = run(hf, "cells", [0.3], [0.7], cells=1 << 15)
+    assert np.isfinite(h).all()
+    with pytest.raises(ValueError, match="'cells'"):
+        run(hf, "cells", [0.3], [0.7], cells=(1 << 15) + 1)
+
+
+def test_defaults_are_the_documented_ones(hf):
+    """The defaults the plugin docstrings (plugins/ripples.py, bricks.py, cells.py) state."""
+    assert hf.pattern_defaults("ripples") == {"frequency": 8.0, "phase": 0.0}
+    assert hf.pattern_defaults("bricks") == {"rows": 8, "columns": 4, "mortar": 0.1, "bevel": 0.15}
+    assert hf.pattern_defaults("cells") == {"cells": 8, "radius": 0.5, "jitter": 1.0, "seed": 0}
