@@ -224,3 +224,40 @@ def test_defaults_are_the_documented_ones(hf):
     assert hf.pattern_defaults("ripples") == {"frequency": 8.0, "phase": 0.0}
     assert hf.pattern_defaults("bricks") == {"rows": 8, "columns": 4, "mortar": 0.1, "bevel": 0.15}
     assert hf.pattern_defaults("cells") == {"cells": 8, "radius": 0.5, "jitter": 1.0, "seed": 0}
+
+
+def test_ripples_phase_shifts_the_u_wave(hf):
+    """h = 1/2 + 1/2 sin(2 pi f_u u + phase) sin(2 pi f_v v), by hand at a non-zero phase."""
+    u, v, phase = np.array([0.1, 0.35]), np.array([0.2, 0.05]), 0.5
+    h, _ = run(hf, "ripples", u, v, frequency=(1, 2), phase=phase)
+    expected = 0.5 + 0.5 * np.sin(2 * np.pi * u + phase) * np.sin(4 * np.pi * v)
+    np.testing.assert_allclose(h, expected, atol=2e-6)
+
+
+def test_pattern_functions_default_to_the_checked_defaults(hf):
+    """Called without parameters, each pattern is the one its documented defaults give."""
+    u, v = np.random.default_rng(6).random((2, 64))
+    for name in ("ripples", "bricks", "cells"):
+        plain = run(hf, name, u, v)
+        explicit = run(hf, name, u, v, **hf.pattern_defaults(name))
+        np.testing.assert_array_equal(plain[0], explicit[0])
+        np.testing.assert_array_equal(plain[1], explicit[1])
+
+
+@pytest.mark.parametrize("name, params, message", [
+    ("cells", dict(jitter=1.5), "cells: parameter 'jitter' must be finite and in [0, 1], got 1.5"),
+    ("cells", dict(seed=2**31), "cells: parameter 'seed' must be finite and in [0, 2.14748e+09], "
+                                "got 2147483648"),
+    ("bricks", dict(mortar=0.4, bevel=0.35),
+     "bricks: parameter 'mortar' + 2*'bevel' must be <= 1 (the joint and both ramps fit in one "
+     "brick height), got 0.4 + 2*0.35"),
+])
+def test_more_bad_parameter_messages_are_exact(hf, name, params, message):
+    with pytest.raises(ValueError) as caught:
+        hf.PATTERNS[name][0](mi.Point2f(0.5, 0.5), **params)
+    assert str(caught.value) == message
+
+
+def test_largest_seed_is_accepted(hf):
+    h, _ = run(hf, "cells", [0.3], [0.7], seed=2**31 - 1)
+    assert np.isfinite(h).all()

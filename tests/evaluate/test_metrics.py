@@ -178,3 +178,18 @@ def test_error_messages_are_exact(call, message):
     with pytest.raises(ValueError) as caught:
         call()
     assert re.fullmatch(message, str(caught.value)), str(caught.value)
+
+
+@pytest.mark.parametrize("shape, window", [((24, 24, 3), 7), ((6, 9, 3), 5), ((4, 4, 3), 3),
+                                           ((5, 8, 3), 5)])
+def test_ssim_window_is_the_largest_odd_size_up_to_7(shape, window):
+    """scikit-image's SSIM with the documented window: 7, or the largest odd size that fits."""
+    from skimage.metrics import structural_similarity
+
+    rng = np.random.default_rng(4)
+    ref = rng.uniform(0, 1, shape)
+    test = np.clip(ref + rng.normal(0, 0.1, shape), 0, 1)
+    direct = structural_similarity(metrics.to_srgb(ref.astype(np.float32)),
+                                   metrics.to_srgb(test.astype(np.float32)), data_range=1.0,
+                                   channel_axis=-1, win_size=window)
+    assert metrics.ssim(ref, test) == pytest.approx(direct, rel=1e-6)
