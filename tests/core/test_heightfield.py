@@ -261,3 +261,16 @@ def test_more_bad_parameter_messages_are_exact(hf, name, params, message):
 def test_largest_seed_is_accepted(hf):
     h, _ = run(hf, "cells", [0.3], [0.7], seed=2**31 - 1)
     assert np.isfinite(h).all()
+
+
+def test_running_bond_repeats_every_two_rows(hf):
+    """Odd rows are shifted by half a brick, even rows not: h(u, v) = h(u, v + 2/rows) for
+    every row (rows 1 and 3 included), and rows 0 and 1 differ."""
+    rows = 8
+    u, v = np.random.default_rng(7).random((2, 400))
+    v = v * (6 / rows)                                 # rows 0 to 5
+    h, _ = run(hf, "bricks", u, v, rows=rows, columns=4)
+    h2, _ = run(hf, "bricks", u, v + 2 / rows, rows=rows, columns=4)
+    np.testing.assert_allclose(h, h2, atol=1e-5)
+    h1, _ = run(hf, "bricks", u, v + 1 / rows, rows=rows, columns=4)
+    assert np.abs(h - h1).max() > 0.5

@@ -193,3 +193,17 @@ def test_ssim_window_is_the_largest_odd_size_up_to_7(shape, window):
                                    metrics.to_srgb(test.astype(np.float32)), data_range=1.0,
                                    channel_axis=-1, win_size=window)
     assert metrics.ssim(ref, test) == pytest.approx(direct, rel=1e-6)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: metrics.ssim(np.zeros((2, 5, 3)), np.zeros((2, 5, 3))),
+     r"ssim: images must be at least 3x3 pixels, got \(2, 5\)"),
+    (lambda: metrics.mesh_distance(42, (np.eye(3), [[0, 1, 2]])),
+     r"mesh a: expected a trimesh.Trimesh or \(vertices, faces\)"),
+    (lambda: metrics.mesh_distance((np.eye(3), [[0, 1, 2]]), (np.zeros((3, 2)), [[0, 1, 2]])),
+     r"mesh b: vertices must have shape \(V, 3\), got \(3, 2\)"),
+])
+def test_more_error_messages_are_exact(call, message):
+    with pytest.raises(ValueError) as caught:
+        call()
+    assert re.fullmatch(message, str(caught.value)), str(caught.value)
