@@ -38,7 +38,7 @@ rows = db.execute("select SourceFile.filename, Mutant.status, count(*) from Muta
                   "join Line on Mutant.line = Line.id join SourceFile on Line.sourcefile = "
                   "SourceFile.id group by 1, 2").fetchall()
 files = sorted({r[0] for r in rows})
-print("| module | killed | survived | timeout | untested | score (killed / tested) |")
+print("| module | killed | survived | timeout | untested | score ((killed + timeout) / tested) |")
 print("|---|---|---|---|---|---|")
 for f in files:
     n = {s: c for name, s, c in rows if name == f}

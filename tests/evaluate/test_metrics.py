@@ -207,3 +207,22 @@ def test_more_error_messages_are_exact(call, message):
     with pytest.raises(ValueError) as caught:
         call()
     assert re.fullmatch(message, str(caught.value)), str(caught.value)
+
+
+def _triangle():
+    return np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]])
+
+
+@pytest.mark.parametrize("mesh, message", [
+    ((_triangle()[0], np.array([[0, 1]])), r"mesh b: faces must have shape \(F, 3\) with F > 0, got \(1, 2\)"),
+    ((_triangle()[0], np.array([[0, 1, 3]])), r"mesh b: faces must be integer indices in \[0, 3\)"),
+    ((_triangle()[0], np.array([[0.0, 1.0, 2.0]])), r"mesh b: faces must be integer indices in \[0, 3\)"),
+    ((np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]), np.array([[0, 1, 2]])),
+     r"mesh b: the mesh has zero surface area"),
+])
+def test_bad_meshes_are_refused_with_exact_messages(mesh, message):
+    """Index == vertex count, float indices, a 2-column face array and a degenerate
+    (collinear) triangle are refused before any distance is computed."""
+    with pytest.raises(ValueError) as caught:
+        metrics.mesh_distance(_triangle(), mesh, samples=10)
+    assert re.fullmatch(message, str(caught.value)), str(caught.value)
