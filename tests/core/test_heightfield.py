@@ -187,3 +187,90 @@ def test_bad_to_uv(hf):
         hf.uv_affine(np.full((3, 3), np.nan))
     with pytest.raises(ValueError, match="unknown height pattern"):
         hf.evaluate("waves", mi.Point2f(0.5, 0.5))
+
+
+# -- mutants that survived the tests above (docs/testing.md, mutation testing) ---------------
+
+
+@pytest.mark.parametrize("name, params, message", [
+    ("ripples", dict(frequency="x"), "ripples: parameter 'frequency' must be a number, got 'x'"),
+    ("ripples", dict(frequency=0), "ripples: parameter 'frequency' must be finite and in (0, inf), got 0"),
+    ("ripples", dict(phase=math.inf), "ripples: parameter 'phase' must be finite and in (-inf, inf), got inf"),
+    ("ripples", dict(frequency=(1, 2, 3)),
+     "ripples: parameter 'frequency' must be a number or a (u, v) pair, got (1, 2, 3)"),
+    ("bricks", dict(mortar=0.5), "bricks: parameter 'mortar' must be finite and in [0, 0.5), got 0.5"),
+    ("bricks", dict(rows=2.5), "bricks: parameter 'rows' must be an integer, got 2.5"),
+    ("cells", dict(radius=1.5), "cells: parameter 'radius' must be finite and in (0, 1], got 1.5"),
+    ("cells", dict(cells=(1 << 15) + 1),
+     "cells: parameter 'cells' must be finite and in [1, 32768], got 32769"),
+])
+def test_bad_parameter_messages_are_exact(hf, name, params, message):
+    """The whole message: pattern, parameter, the allowed interval with its open/closed ends."""
+    with pytest.raises(ValueError) as caught:
+        hf.PATTERNS[name][0](mi.Point2f(0.5, 0.5), **params)
+    assert str(caught.value) == message
+
+
+def test_cell_count_limit_is_the_32_bit_key_bound(hf):
+    """Cell keys i + n j with n = 2^15 cells stay below 2^31: the largest count accepted."""
+    h, _ = run(hf, "cells", [0.3], [0.7], cells=1 << 15)
+    assert np.isfinite(h).all()
+    with pytest.raises(ValueError, match="'cells'"):
+        run(hf, "cells", [0.3], [0.7], cells=(1 << 15) + 1)
+
+
+def test_defaults_are_the_documented_ones(hf):
+    """The defaults the plugin docstrings (plugins/ripples.py, bricks.py, cells.py) state."""
+    assert hf.pattern_defaults("ripples") == {"frequency": 8.0, "phase": 0.0}
+    assert hf.pattern_defaults("bricks") == {"rows": 8, "columns": 4, "mortar": 0.1, "bevel": 0.15}
+    assert hf.pattern_defaults("cells") == {"cells": 8, "radius": 0.5, "jitter": 1.0, "seed": 0}
+
+
+def test_ripples_phase_shifts_the_u_wave(hf):
+    """h = 1/2 + 1/2 sin(2 pi f_u u + phase) sin(2 pi f_v v), by hand at a non-zero phase."""
+    u, v, phase = np.array([0.1, 0.35]), np.array([0.2, 0.05]), 0.5
+    h, _ = run(hf, "ripples", u, v, frequency=(1, 2), phase=phase)
+    expected = 0.5 + 0.5 * np.sin(2 * np.pi * u + phase) * np.sin(4 * np.pi * v)
+    np.testing.assert_allclose(h, expected, atol=2e-6)
+
+
+def test_pattern_functions_default_to_the_checked_defaults(hf):
+    """Called without parameters, each pattern is the one its documented defaults give."""
+    u, v = np.random.default_rng(6).random((2, 64))
+    for name in ("ripples", "bricks", "cells"):
+        plain = run(hf, name, u, v)
+        explicit = run(hf, name, u, v, **hf.pattern_defaults(name))
+        np.testing.assert_array_equal(plain[0], explicit[0])
+        np.testing.assert_array_equal(plain[1], explicit[1])
+
+
+@pytest.mark.parametrize("name, params, message", [
+    ("cells", dict(jitter=1.5), "cells: parameter 'jitter' must be finite and in [0, 1], got 1.5"),
+    ("cells", dict(seed=2**31), "cells: parameter 'seed' must be finite and in [0, 2.14748e+09], "
+                                "got 2147483648"),
+    ("bricks", dict(mortar=0.4, bevel=0.35),
+     "bricks: parameter 'mortar' + 2*'bevel' must be <= 1 (the joint and both ramps fit in one "
+     "brick height), got 0.4 + 2*0.35"),
+])
+def test_more_bad_parameter_messages_are_exact(hf, name, params, message):
+    with pytest.raises(ValueError) as caught:
+        hf.PATTERNS[name][0](mi.Point2f(0.5, 0.5), **params)
+    assert str(caught.value) == message
+
+
+def test_largest_seed_is_accepted(hf):
+    h, _ = run(hf, "cells", [0.3], [0.7], seed=2**31 - 1)
+    assert np.isfinite(h).all()
+
+
+def test_running_bond_repeats_every_two_rows(hf):
+    """Odd rows are shifted by half a brick, even rows not: h(u, v) = h(u, v + 2/rows) for
+    every row (rows 1 and 3 included), and rows 0 and 1 differ."""
+    rows = 8
+    u, v = np.random.default_rng(7).random((2, 400))
+    v = v * (6 / rows)                                 # rows 0 to 5
+    h, _ = run(hf, "bricks", u, v, rows=rows, columns=4)
+    h2, _ = run(hf, "bricks", u, v + 2 / rows, rows=rows, columns=4)
+    np.testing.assert_allclose(h, h2, atol=1e-5)
+    h1, _ = run(hf, "bricks", u, v + 1 / rows, rows=rows, columns=4)
+    assert np.abs(h - h1).max() > 0.5

@@ -1,4 +1,6 @@
 """Image and mesh metrics against hand-computed values."""
+import re
+
 import numpy as np
 import pytest
 import trimesh
@@ -127,3 +129,100 @@ def test_mesh_distance_bad_input():
     nan_vertices[0, 0] = np.nan
     with pytest.raises(ValueError, match="mesh a vertices: 1 NaN"):
         metrics.mesh_distance((nan_vertices, a.faces), a)
+
+
+# -- mutants that survived the tests above (docs/testing.md, mutation testing) ---------------
+
+
+def test_relmse_and_psnr_with_references_that_are_neither_0_nor_1():
+    """relMSE divides by ref² (not ref or ref³): at ref 2 the squared error 0.04 is divided
+    by 4 + eps; PSNR takes the difference (not the sum) of the encoded images."""
+    ref, test = np.full((4, 4, 3), 2.0), np.full((4, 4, 3), 2.2)
+    assert metrics.relmse(ref, test, eps=0.01) == pytest.approx(0.04 / 4.01, rel=1e-5)
+    half, one = np.full((8, 8, 3), SRGB_HALF), np.ones((8, 8, 3))   # sRGB 0.5 and 1.0
+    assert metrics.psnr(half, one) == pytest.approx(10 * np.log10(4.0), abs=1e-4)
+    assert metrics.psnr(one, half) == pytest.approx(10 * np.log10(4.0), abs=1e-4)
+
+
+def test_flip_passes_the_viewing_distance_to_flip():
+    """``ppd`` reaches ꟻLIP: the result is flip_evaluator's own at that ppd, and a coarser
+    viewing condition changes it."""
+    import flip_evaluator
+
+    rng = np.random.default_rng(3)
+    ref = rng.uniform(0, 1, (24, 24, 3))
+    test = np.clip(ref + rng.normal(0, 0.05, ref.shape), 0, 1)
+    direct = flip_evaluator.evaluate(metrics.to_srgb(ref.astype(np.float32)),
+                                     metrics.to_srgb(test.astype(np.float32)), "LDR",
+                                     parameters={"ppd": 20.0})[1]
+    assert metrics.flip(ref, test, ppd=20)[0] == pytest.approx(direct, rel=1e-6)
+    assert abs(metrics.flip(ref, test, ppd=20)[0] - metrics.flip(ref, test)[0]) > 1e-3
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: metrics.assert_finite(np.array([1.0, np.nan]), "depth map"),
+     r"depth map: 1 NaN and 0 Inf values out of 2 \(first at index \(1,\)\)"),
+    (lambda: metrics.flip(np.zeros((8, 8, 2)), np.zeros((8, 8, 3))),
+     r"reference: expected an image of shape \(H, W, 3\), got shape \(8, 8, 2\)"),
+    (lambda: metrics.flip(np.zeros((8, 8, 3)), np.zeros((8, 8, 2))),
+     r"test: expected an image of shape \(H, W, 3\), got shape \(8, 8, 2\)"),
+    (lambda: metrics.psnr(np.full((2, 2, 3), np.inf), np.zeros((2, 2, 3))),
+     r"reference: 0 NaN and 12 Inf values out of 12 \(first at index \(0, 0, 0\)\)"),
+    (lambda: metrics.psnr(np.zeros((2, 2, 3)), np.zeros((2, 3, 3))),
+     r"reference and test differ in shape: \(2, 2, 3\) vs \(2, 3, 3\)"),
+    (lambda: metrics.relmse(np.zeros((2, 2, 3)), np.zeros((2, 2, 3)), eps=-1.0),
+     r"eps: must be > 0, got -1.0"),
+])
+def test_error_messages_are_exact(call, message):
+    """The whole message, start to end: it names the array or parameter first."""
+    with pytest.raises(ValueError) as caught:
+        call()
+    assert re.fullmatch(message, str(caught.value)), str(caught.value)
+
+
+@pytest.mark.parametrize("shape, window", [((24, 24, 3), 7), ((6, 9, 3), 5), ((4, 4, 3), 3),
+                                           ((5, 8, 3), 5)])
+def test_ssim_window_is_the_largest_odd_size_up_to_7(shape, window):
+    """scikit-image's SSIM with the documented window: 7, or the largest odd size that fits."""
+    from skimage.metrics import structural_similarity
+
+    rng = np.random.default_rng(4)
+    ref = rng.uniform(0, 1, shape)
+    test = np.clip(ref + rng.normal(0, 0.1, shape), 0, 1)
+    direct = structural_similarity(metrics.to_srgb(ref.astype(np.float32)),
+                                   metrics.to_srgb(test.astype(np.float32)), data_range=1.0,
+                                   channel_axis=-1, win_size=window)
+    assert metrics.ssim(ref, test) == pytest.approx(direct, rel=1e-6)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: metrics.ssim(np.zeros((2, 5, 3)), np.zeros((2, 5, 3))),
+     r"ssim: images must be at least 3x3 pixels, got \(2, 5\)"),
+    (lambda: metrics.mesh_distance(42, (np.eye(3), [[0, 1, 2]])),
+     r"mesh a: expected a trimesh.Trimesh or \(vertices, faces\)"),
+    (lambda: metrics.mesh_distance((np.eye(3), [[0, 1, 2]]), (np.zeros((3, 2)), [[0, 1, 2]])),
+     r"mesh b: vertices must have shape \(V, 3\), got \(3, 2\)"),
+])
+def test_more_error_messages_are_exact(call, message):
+    with pytest.raises(ValueError) as caught:
+        call()
+    assert re.fullmatch(message, str(caught.value)), str(caught.value)
+
+
+def _triangle():
+    return np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]])
+
+
+@pytest.mark.parametrize("mesh, message", [
+    ((_triangle()[0], np.array([[0, 1]])), r"mesh b: faces must have shape \(F, 3\) with F > 0, got \(1, 2\)"),
+    ((_triangle()[0], np.array([[0, 1, 3]])), r"mesh b: faces must be integer indices in \[0, 3\)"),
+    ((_triangle()[0], np.array([[0.0, 1.0, 2.0]])), r"mesh b: faces must be integer indices in \[0, 3\)"),
+    ((np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]), np.array([[0, 1, 2]])),
+     r"mesh b: the mesh has zero surface area"),
+])
+def test_bad_meshes_are_refused_with_exact_messages(mesh, message):
+    """Index == vertex count, float indices, a 2-column face array and a degenerate
+    (collinear) triangle are refused before any distance is computed."""
+    with pytest.raises(ValueError) as caught:
+        metrics.mesh_distance(_triangle(), mesh, samples=10)
+    assert re.fullmatch(message, str(caught.value)), str(caught.value)
