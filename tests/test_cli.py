@@ -152,7 +152,8 @@ def test_user_errors_found_while_rendering_are_one_line(variant, tmp_path, capsy
 def test_bad_values_in_xml_name_the_parameter(variant, tmp_path, capsys, element, message):
     scene = _bare(tmp_path, f'<shape type="displaced"><string name="base" value="sphere"/>{element}'
                             '<texture name="height" type="cells"/></shape>')
-    _one_line(_fails_with_2(capsys, ["render", scene, "--out", str(tmp_path / "x.exr")], message))
+    line = _one_line(_fails_with_2(capsys, ["render", scene, "--out", str(tmp_path / "x.exr")], message))
+    assert line.startswith("mi-displace: error:") and message in line
 
 
 def test_a_variant_the_machine_lacks_is_a_usage_error(tmp_path, capsys):
@@ -160,8 +161,9 @@ def test_a_variant_the_machine_lacks_is_a_usage_error(tmp_path, capsys):
 
     if dr.has_backend(dr.JitBackend.CUDA):
         pytest.skip("this machine has a CUDA GPU")
-    _one_line(_fails_with_2(capsys, ["--variant", "cuda_ad_rgb", "render", SCENE, "--out",
-                                     str(tmp_path / "x.exr")], "needs a CUDA GPU"))
+    line = _one_line(_fails_with_2(capsys, ["--variant", "cuda_ad_rgb", "render", SCENE, "--out",
+                                            str(tmp_path / "x.exr")], "needs a CUDA GPU"))
+    assert line.startswith("mi-displace: error:") and "cuda_ad_rgb" in line
 
 
 def test_a_bug_prints_its_traceback_and_asks_for_a_report(variant, monkeypatch, capsys):

@@ -10,17 +10,9 @@
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
 
 
 def _cmd_animate(args) -> int:
@@ -50,7 +42,7 @@ def _cmd_figures(args) -> int:
 
 
 def add_commands(sub) -> dict:
-    from mi_displace.cli import _define
+    from mi_displace.cli import _define, _positive_int
 
     p = sub.add_parser("ddm-animate", help="render a DDM animation (steps SHAPE.time)")
     p.add_argument("scene", type=Path, help="scene XML with a ddm shape")

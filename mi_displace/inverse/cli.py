@@ -18,16 +18,6 @@ import json
 from pathlib import Path
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
-
-
 def _positive_float(text: str) -> float:
     try:
         value = float(text)
@@ -40,6 +30,7 @@ def _positive_float(text: str) -> float:
 
 def add_commands(sub) -> dict:
     """Add ``recover`` to ``sub``; returns {command: handler}."""
+    from mi_displace.cli import _positive_int
     p = sub.add_parser("recover", help="recover a height map from renders (inverse displacement)")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--iterations", type=_positive_int, default=40, help="Adam steps (default 40)")
