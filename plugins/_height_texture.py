@@ -8,12 +8,18 @@ variant, so :func:`height_texture_base` builds the base class for the *current* 
 A subclass sets ``PATTERN`` (a key of :data:`mi_displace.core.heightfield.PATTERNS`); its
 properties are then the pattern's parameters with the pattern's defaults. It may override
 :meth:`read_properties` and :meth:`pattern_params` to map other properties onto them.
-Every property is a plain number, exposed by ``traverse`` as a non-differentiable
-``mi.Float`` and re-validated in ``parameters_changed``. ``to_uv`` (optional, as in
+Every property is a number, exposed by ``traverse`` as an ``mi.Float`` and re-validated
+in ``parameters_changed``: ``Differentiable`` for the continuous ones (an AD gradient
+enabled on one enters the pattern's kernels as that array, so it reaches the height, its
+gradient and, through ``displaced``, the image), ``NonDifferentiable`` for the integer
+counts and seeds (:data:`mi_displace.core.heightfield.INTEGER_PARAMETERS`; ``displaced``
+refuses a gradient on them, naming them).  Without a gradient the kernels get the plain
+Python floats, exactly as before. ``to_uv`` (optional, as in
 ``bitmap``) is exposed as a ``mi.ScalarTransform3f``.
 """
 from __future__ import annotations
 
+import drjit as dr
 import mitsuba as mi
 import numpy as np
 
@@ -68,22 +74,32 @@ def _make_base() -> type:
 
         def parameters_changed(self, keys=None):
             flat = dict(self._flat)
-            flat.update({k: float(self._values[k][0]) for k in keys or () if k in self._values})
+            flat.update({k: float(dr.detach(self._values[k])[0]) for k in keys or ()
+                         if k in self._values})
             _, check, mean = hf.PATTERNS[self.PATTERN]
             self._params = check(**self.pattern_params(flat))   # ValueError names the key
             self._flat = flat
             self._affine = hf.uv_affine(self._to_uv, self.PATTERN)
             self._mean = mean(**self._params)
+            # the traversed arrays with a gradient enabled replace their floats in the kernels
+            live = {k: self._values[k] if self.is_continuous(k) and dr.grad_enabled(
+                self._values[k]) else v for k, v in flat.items()}
+            self._live = self.pattern_params(live)
+
+        def is_continuous(self, name: str) -> bool:
+            """Whether the flat property ``name`` is continuous (hence differentiable)."""
+            return name not in hf.INTEGER_PARAMETERS[self.PATTERN]
 
         def traverse(self, cb):
             for name, value in self._values.items():
-                cb.put(name, value, mi.ParamFlags.NonDifferentiable)
+                cb.put(name, value, mi.ParamFlags.Differentiable if self.is_continuous(name)
+                       else mi.ParamFlags.NonDifferentiable)
             cb.put("to_uv", self._to_uv, mi.ParamFlags.NonDifferentiable)
 
         # -- evaluation ------------------------------------------------------------------
         def height(self, si: mi.SurfaceInteraction3f) -> tuple[mi.Float, mi.Vector2f]:
             """``(h, dh/d(si.uv))``: the pattern at ``to_uv(si.uv)`` with the chain rule."""
-            return hf.evaluate(self.PATTERN, si.uv, self._affine, **self._params)
+            return hf.evaluate(self.PATTERN, si.uv, self._affine, **self._live)
 
         def eval_1(self, si, active=True):
             return self.height(si)[0]

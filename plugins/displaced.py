@@ -14,8 +14,10 @@
 
 Mesh bases: ``base="mesh"`` with ``filename`` (PLY/OBJ with UVs) and ``subdivision`` (edge
 splits per triangle) or ``edge_length``.  Meshes without UVs are refused (unwrap them
-first, e.g. with ``mi_displace.bake.unwrap.unwrap`` (xatlas)).  ``scale`` and ``midlevel`` are editable through
-``mi.traverse`` (re-displacement keeps the topology).
+first, e.g. with ``mi_displace.bake.unwrap.unwrap`` (xatlas)).  ``scale``, ``midlevel`` and the height texture's parameters are editable through
+``mi.traverse`` (re-displacement keeps the topology) and differentiable (issue 14: the
+vertices and shading normals are recomputed with the AD graph attached; integer texture
+parameters and the dicing rates refuse a gradient, naming it).
 
 Screen-adaptive dicing (:mod:`mi_displace.core.dicing`, Cycles' meaning): ``dicing_rate``
 (pixels per micro-edge, instead of ``resolution`` / ``subdivision`` / ``edge_length``;
@@ -307,7 +309,8 @@ class Displaced(mi.Mesh):
     def _dice_key(self) -> tuple:
         """Everything the diced mesh depends on (sensor states and the four parameters);
         a parameter with a gradient enabled always rebuilds (its graph must be fresh)."""
-        grad = dr.grad_enabled(self.scale) or dr.grad_enabled(self.midlevel)
+        grad = (dr.grad_enabled(self.scale) or dr.grad_enabled(self.midlevel)
+                or self._texture_grad_enabled())
         return ([dicing.sensor_view(s).key() for s in self.sensors],
                 float(dr.detach(self.scale)[0]), float(dr.detach(self.midlevel)[0]),
                 float(self.dicing_rate[0]), float(self.offscreen_dicing_scale[0]),
@@ -357,6 +360,14 @@ class Displaced(mi.Mesh):
         else:
             super().parameters_changed(keys)
 
+    def _texture_grad_enabled(self) -> bool:
+        """Whether a parameter of the height texture (texels, a procedural number) has a
+        gradient enabled."""
+        if self.height_texture is None:
+            return False
+        params = mi.traverse(self.height_texture)
+        return any(dr.is_array_v(params[k]) and dr.grad_enabled(params[k]) for k in params.keys())
+
     def _refuse_gradients_that_cannot_flow(self) -> None:
         """ValueError naming a parameter whose gradient would silently stay zero."""
         names = [k for k in ("dicing_rate", "offscreen_dicing_scale")
@@ -370,7 +381,9 @@ class Displaced(mi.Mesh):
             raise ValueError(f"displaced {self.id()!r}: a gradient was enabled on "
                              f"{', '.join(map(repr, names))}, which the tessellation cannot "
                              "differentiate (it would stay exactly zero); differentiable: "
-                             "'scale', 'midlevel' and the height texture's data")
+                             "'scale', 'midlevel' and the height texture's continuous "
+                             "parameters (a bitmap's data; ripples' frequencies and phase, "
+                             "bricks' mortar and bevel, cells' radius and jitter)")
 
     def to_string(self):
         s = self.build_stats

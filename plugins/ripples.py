@@ -4,6 +4,7 @@ Properties: ``frequency`` (periods per unit uv, default 8), ``frequency_u`` /
 ``frequency_v`` (per-axis overrides), ``phase`` (radians, default 0), ``to_uv`` (optional
 transform). See :func:`mi_displace.core.heightfield.ripples`.
 """
+import drjit as dr
 import mitsuba as mi
 
 from mi_displace.core.heightfield import check_real, pattern_defaults
@@ -23,8 +24,9 @@ class Ripples(height_texture_base()):
                 "phase": props.get("phase", defaults["phase"])}
 
     def pattern_params(self, flat):
-        fu, fv = flat["frequency_u"], flat["frequency_v"]
-        return {"frequency": fu if fu == fv else (fu, fv), "phase": flat["phase"]}
+        fu, fv = flat["frequency_u"], flat["frequency_v"]   # floats, or mi.Float with a gradient
+        same = not (dr.is_array_v(fu) or dr.is_array_v(fv)) and fu == fv
+        return {"frequency": fu if same else (fu, fv), "phase": flat["phase"]}
 
 
 def register():

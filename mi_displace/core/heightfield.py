@@ -11,7 +11,10 @@ Every pattern is a pure Dr.Jit function of texture coordinates::
   exact wherever ``h`` is differentiable (everywhere except measure-zero creases).
 
 Parameters are Python numbers, validated (``ValueError`` naming the parameter) before any
-kernel is traced. Each pattern is periodic over the unit square when its counts are
+kernel is traced.  A continuous parameter (every one but the integer counts and seeds of
+:data:`INTEGER_PARAMETERS`) may instead be a width-1 ``mi.Float``: it is validated by its
+value and enters the kernels as that array, so an AD gradient enabled on it reaches ``h``
+and ``grad`` (issue 14: differentiable procedural heights). Each pattern is periodic over the unit square when its counts are
 integers: ``h(u + 1, v) == h(u, v) == h(u, v + 1)``, so it tiles seamlessly across the
 ``u``/``v`` seams of closed surfaces. Coordinates are reduced to ``[0, 1)`` first, so
 offsets far from the origin keep float32 precision.
@@ -33,8 +36,14 @@ MAX_CELLS = 1 << 15  # cell keys i + n*j must fit in 32 bits
 
 def check_real(pattern: str, name: str, value, low=None, high=None, low_open=False,
                high_open=False) -> float:
-    """``value`` as a finite float inside the given interval, else a ``ValueError`` naming
-    ``pattern`` and the parameter ``name``."""
+    """``value`` (a number or a width-1 Dr.Jit array, checked by its detached value) as a
+    finite float inside the given interval, else a ``ValueError`` naming ``pattern`` and the
+    parameter ``name``."""
+    if dr.is_array_v(value):
+        if dr.width(value) != 1 or dr.depth_v(value) != 1:
+            raise ValueError(f"{pattern}: parameter '{name}' must be a single number, got an "
+                             f"array of width {dr.width(value)}")
+        value = float(dr.detach(value)[0])
     try:
         x = float(value)
     except (TypeError, ValueError):
@@ -57,6 +66,17 @@ def _integer(pattern: str, name: str, value, low: int = 1, high: int | None = No
     if x != int(x):
         raise ValueError(f"{pattern}: parameter '{name}' must be an integer, got {value!r}")
     return int(x)
+
+
+INTEGER_PARAMETERS = {"ripples": (), "bricks": ("rows", "columns"), "cells": ("cells", "seed")}
+"""pattern -> its integer parameters (counts, seeds): not differentiable; every other
+parameter is continuous and may carry an AD gradient."""
+
+
+def _attached(checked: float, given):
+    """``given`` itself when it is a Dr.Jit array (validated as ``checked``; its AD graph
+    kept), else the checked float."""
+    return given if dr.is_array_v(given) else checked
 
 
 def check_ripples(frequency=8.0, phase=0.0) -> dict:
@@ -107,7 +127,10 @@ def ripples(uv: mi.Point2f, frequency=8.0, phase=0.0) -> tuple[mi.Float, mi.Vect
     pattern is periodic over the unit square for integer frequencies. ``phase``: radians.
     """
     p = check_ripples(frequency, phase)
-    (fu, fv), phase = p["frequency"], p["phase"]
+    pair = isinstance(frequency, (tuple, list, np.ndarray))
+    given = frequency if pair else (frequency, frequency)
+    fu, fv = (_attached(f, g) for f, g in zip(p["frequency"], given))
+    phase = _attached(p["phase"], phase)
     a = TWO_PI * _frac(fu * uv.x) + phase   # argument reduction: exact periodicity
     b = TWO_PI * _frac(fv * uv.y)
     sa, ca = dr.sincos(a)
@@ -134,7 +157,8 @@ def bricks(uv: mi.Point2f, rows=8, columns=4, mortar=0.1, bevel=0.15
     across the ``v`` seam (still periodic, just not alternating there).
     """
     p = check_bricks(rows, columns, mortar, bevel)
-    rows, columns, mortar, bevel = p["rows"], p["columns"], p["mortar"], p["bevel"]
+    rows, columns = p["rows"], p["columns"]
+    mortar, bevel = _attached(p["mortar"], mortar), _attached(p["bevel"], bevel)
     y = rows * _frac(uv.y)
     row = dr.floor(y)
     py = y - row
@@ -171,7 +195,8 @@ def cells(uv: mi.Point2f, cells=8, radius=0.5, jitter=1.0, seed=0
     bump inside the 3x3 neighbourhood); ``0 <= jitter <= 1``; ``seed``: integer >= 0.
     """
     p = check_cells(cells, radius, jitter, seed)
-    n, radius, jitter, seed = p["cells"], p["radius"], p["jitter"], p["seed"]
+    n, seed = p["cells"], p["seed"]
+    radius, jitter = _attached(p["radius"], radius), _attached(p["jitter"], jitter)
     x, y = n * _frac(uv.x), n * _frac(uv.y)
     fx, fy = dr.floor(x), dr.floor(y)
     ix, iy = mi.Int32(fx), mi.Int32(fy)
