@@ -1,6 +1,6 @@
 """`mi-displace bench grad`: differentiable ``displaced`` (issue 14) - cost, accuracy, recovery.
 
-1. **1M triangles**: the recovery's plane (:func:`mi_displace.inverse.recover.scene_dict`,
+1. **1M triangles, plane**: the recovery's plane (:func:`mi_displace.inverse.recover.scene_dict`,
    64^2 Bricks102 bitmap) tessellated at 708^2 cells (1,002,528 triangles), one 256^2
    ``prb_projective`` render at 4 spp with the texels' gradient enabled (``forward_s``:
    re-displacement + render) and ``dr.backward`` of the L2 loss (``backward_s``); the
@@ -11,11 +11,18 @@
    same tessellation called with plain Python floats and a detached texture (the path
    without any AD), best of 5 each, same process (kernels synchronised); plus the plain
    forward render time.
-3. **Gradient checks** (:mod:`mi_displace.inverse.gradcheck`) on the 16^2-map plane at
-   32^2: ``scale``, ``midlevel`` and a Gaussian bump of texels (``height``) under
-   ``direct_projective`` and ``prb_projective``, 64 spp, AD mean of 3 seeds against central
-   differences at 256 spp (``grad_rel_error_*``: the ``prb_projective`` ones).
-4. **Recovery** (:func:`mi_displace.inverse.recover.recover`): 64^2 map, 3 views x 2 lights,
+3. **1M triangles, sphere** (``million_sphere``): a 1,046,528-triangle displaced sphere
+   (ripples), a ``scale`` edit re-displaced without and with a gradient enabled (Mitsuba's
+   BVH rebuild included, warm median of 3), one ``direct_projective`` render at 256^2,
+   16 spp with the gradient, and its backward pass.
+4. **Gradient checks** (:mod:`mi_displace.inverse.gradcheck`): on the 16^2-map plane at
+   32^2, ``scale``, ``midlevel`` and a Gaussian bump of texels (``height``), 64 spp, AD and
+   central differences (256 spp, same seed per pair) each the mean of 16 seeds
+   (``grad_rel_error_*``: the ``prb_projective`` ones); the procedural textures' continuous
+   parameters on the sphere under a side light and under a light at the eye (no shadow
+   boundaries in view); the four-bump sphere and a rectangle area light (``sppi`` 0 and
+   64): the shadow-boundary bias.
+5. **Recovery** (:func:`mi_displace.inverse.recover.recover`): 64^2 map, 3 views x 2 lights,
    64^2 images, 8 spp, 40 Adam steps, ``prb_projective``: ``recovery_rms`` = height RMS /
    range after the last step.
 
@@ -26,7 +33,9 @@ from __future__ import annotations
 
 import json as _json
 import resource
+import statistics
 import time
+import warnings
 from pathlib import Path
 
 import drjit as dr
@@ -112,13 +121,57 @@ def million(truth: np.ndarray) -> dict:
             "nograd_overhead_ratio": plugin_s / detached_s, "forward_render_nograd_s": render_s}
 
 
+def million_sphere() -> dict:
+    """A ``scale`` edit, forward and backward on a 1,046,528-triangle displaced sphere."""
+    scene = gradcheck.sphere_scene({"type": "ripples"}, image_size=256, spp=16,
+                                   resolution=1024)
+    params = mi.traverse(scene)
+
+    def edit_time(grad: bool) -> float:
+        times = []
+        for i in range(4):
+            params["ball.scale"] = mi.Float(0.1 + 0.001 * i)
+            if grad:
+                dr.enable_grad(params["ball.scale"])
+            dr.sync_thread()
+            clock = time.perf_counter()
+            params.update()
+            dr.eval(params["ball.vertex_positions"])
+            dr.sync_thread()
+            times.append(time.perf_counter() - clock)
+        return statistics.median(times[1:])
+
+    plain, with_grad = edit_time(False), edit_time(True)
+    target = mi.render(scene, spp=16, seed=1)
+    params["ball.scale"] = mi.Float(0.12)
+    dr.enable_grad(params["ball.scale"])
+    params.update()
+    dr.sync_thread()
+    clock = time.perf_counter()
+    loss = dr.mean(dr.square(mi.render(scene, params, spp=16, seed=2) - target), axis=None)
+    dr.eval(loss)
+    dr.sync_thread()
+    forward_s = time.perf_counter() - clock
+    clock = time.perf_counter()
+    dr.backward(loss)
+    grad = dr.grad(params["ball.scale"])
+    dr.eval(grad)
+    dr.sync_thread()
+    return {"faces": scene.shapes()[0].face_count(), "image": 256, "spp": 16,
+            "integrator": "direct_projective", "redisplace_s": plain,
+            "redisplace_grad_s": with_grad, "forward_s": forward_s,
+            "backward_s": time.perf_counter() - clock, "grad_scale": float(grad[0]),
+            "peak_rss_gb": _peak_rss_gb()}
+
+
 CHECKS = (("scale", "surface.scale", 0.01), ("midlevel", "surface.midlevel", 0.02),
           ("height", recover.KEY, 0.05))      # (name, key, eps)
+SEEDS = 16                                    # AD and FD seeds per plane check
 
 
 def checks() -> dict:
     """Gradient checks of ``scale``, ``midlevel`` and a texel bump of the height map
-    (16^2 texels, 32^2 image, 64 spp, AD mean of 3 seeds; differences at 256 spp) under
+    (16^2 texels, 32^2 image, 64 spp; differences at 256 spp; means of 16 seeds each) under
     both projective integrators: {integrator: {name: gradcheck.check result}}."""
     n = 16
     truth = recover.load_height_map(size=n)
@@ -131,27 +184,84 @@ def checks() -> dict:
         params.update()
         bump = gradcheck.texel_bump((n, n, 1), (n // 2, n // 2), 1.5)
         out[integrator] = {name: gradcheck.check(
-            scene, key, target, bump if key == recover.KEY else None, eps=eps, repeats=3)
-            for name, key, eps in CHECKS}
+            scene, key, target, bump if key == recover.KEY else None, eps=eps,
+            repeats=SEEDS, fd_repeats=SEEDS) for name, key, eps in CHECKS}
+    return out
+
+
+def procedural_checks() -> list:
+    """Every :data:`gradcheck.PROCEDURAL` parameter x both integrators x a side light and a
+    light at the eye (3 seeds of AD and of FD each): a list of records."""
+    out = []
+    for integrator in ("direct_projective", "prb_projective"):
+        for light_name, light in (("eye", gradcheck.CAMERA), ("side", gradcheck.SIDE_LIGHT)):
+            for texture, name, value, eps in gradcheck.PROCEDURAL:
+                r = gradcheck.check_procedural(texture, name, value, eps, integrator, light)
+                out.append({"texture": texture["type"], "parameter": name,
+                            "integrator": integrator, "light": light_name, **r})
+    return out
+
+
+def shadow_checks() -> list:
+    """The shadow-boundary bias: the truth branch's four-bump sphere (a 32 x 16 bitmap,
+    h = 0.5 + 0.4 sin(4 pi u) sin(2 pi v); a uniform lift of its texels and ``midlevel``)
+    under the side light and a light at the eye; and bricks' ``mortar`` under a 0.6 x 0.6
+    rectangle area light at the side light's place, ``sppi`` 0 and on (any non-zero
+    ``sppi`` is replaced by the render's 64 spp: Mitsuba's indirect-visibility term, which
+    finds no samples for point lights)."""
+    v, u = np.meshgrid((np.arange(16) + 0.5) / 16, (np.arange(32) + 0.5) / 32, indexing="ij")
+    h = (0.5 + 0.4 * np.sin(4 * np.pi * u) * np.sin(2 * np.pi * v)).astype(np.float32)
+    out = []
+    for light_name, light in (("side", gradcheck.SIDE_LIGHT), ("eye", gradcheck.CAMERA)):
+        scene = gradcheck.sphere_scene(recover.bitmap_height(h), light=light)
+        for name, key, edit, eps, direction in (
+                ("texel lift", "ball.height.data", mi.TensorXf(np.clip(h - 0.2, 0, 1)[..., None]),
+                 0.1, mi.TensorXf(np.ones((16, 32, 1), np.float32))),
+                ("midlevel", "ball.midlevel", mi.Float(0.3), 0.05, None)):
+            r = gradcheck.check(scene, key, gradcheck.target_at(scene, key, edit), direction,
+                                eps=eps, repeats=3, fd_repeats=3)
+            out.append({"scene": "four bumps", "parameter": name, "light": light_name, **r})
+    for sppi in (0, 64):
+        base = gradcheck.sphere_scene({"type": "bricks"})
+        area = {"type": "rectangle", "to_world": mi.ScalarTransform4f().look_at(
+            origin=list(gradcheck.SIDE_LIGHT), target=[0, 0, 0], up=[0, 0, 1]).scale(0.3),
+            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 20 / 0.36}}}
+        scene = mi.load_dict({"type": "scene", "sensor": base.sensors()[0],
+                              "ball": base.shapes()[0], "light": area,
+                              "integrator": {"type": "direct_projective", "sppi": sppi}})
+        key = "ball.height.mortar"
+        r = gradcheck.check(scene, key, gradcheck.target_at(scene, key, 0.15), eps=0.01,
+                            repeats=3, fd_repeats=3)
+        out.append({"scene": "bricks, area light", "parameter": "mortar",
+                    "light": f"area, sppi {sppi}", **r})
     return out
 
 
 def run() -> dict:
     truth = recover.load_height_map(size=64)
     big = million(truth)
+    sphere = million_sphere()
     grads = checks()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # Mitsuba's sppi warning for point lights
+        procedural = procedural_checks()
+        shadows = shadow_checks()
     rec = recover.recover(truth, iterations=40, integrator="prb_projective")
     figures.write(rec, ROOT / "docs" / "figures" / "recovery")
+    eye = [r["rel_error"] for r in procedural if r["light"] == "eye"]
     summary = {
         "faces": big["faces"], "forward_s": big["forward_s"], "backward_s": big["backward_s"],
         "peak_rss_after_backward_gb": big["peak_rss_after_backward_gb"],
         "nograd_overhead_ratio": big["nograd_overhead_ratio"],
+        "sphere_faces": sphere["faces"], "sphere_backward_s": sphere["backward_s"],
         "grad_rel_error_scale": grads["prb_projective"]["scale"]["rel_error"],
         "grad_rel_error_height": grads["prb_projective"]["height"]["rel_error"],
+        "grad_rel_error_procedural_max": max(eye),
         "recovery_rms": rec.rms[-1], "recovery_rms_start": rec.rms[0],
         "recovery_seconds_per_iteration": rec.summary()["seconds_per_iteration"],
     }
-    return {"summary": summary, "million": big, "checks": grads, "recovery": rec.summary()}
+    return {"summary": summary, "million": big, "million_sphere": sphere, "checks": grads,
+            "procedural": procedural, "shadows": shadows, "recovery": rec.summary()}
 
 
 def main(json: bool = False) -> int:

@@ -63,6 +63,13 @@ def check(scene, key: str, target, direction=None, eps: float = 1e-2, spp: int =
             "eps": eps, "grad_finite": finite}
 
 
+def agrees(r: dict, rel: float = 0.1) -> bool:
+    """Whether a :func:`check` result passes: finite, the sign right, and |AD - FD| within
+    ``rel`` |FD| plus 3 standard errors of AD - FD (the part the samples explain)."""
+    return bool(r["grad_finite"] and abs(r["fd"]) > 0 and np.sign(r["ad"]) == np.sign(r["fd"])
+                and abs(r["ad"] - r["fd"]) <= rel * abs(r["fd"]) + 3 * r["stderr"])
+
+
 def texel_bump(shape, center, radius: float) -> mi.TensorXf:
     """A smooth bump of texels (Gaussian, peak 1, std ``radius`` texels) at ``center``
     (row, col): a perturbation direction touching a few texels of an (n, m, 1) map."""
@@ -124,11 +131,18 @@ def check_procedural(texture: dict, name: str, target_value: float, eps: float,
     :func:`sphere_scene`, the target rendered (512 spp) at ``target_value``."""
     sc = sphere_scene(texture, integrator, light, **scene)
     key = f"ball.height.{name}"
-    params = mi.traverse(sc)
+    return check(sc, key, target_at(sc, key, target_value), eps=eps, repeats=repeats,
+                 fd_repeats=fd_repeats)
+
+
+def target_at(scene, key: str, value, spp: int = 512, seed: int = 99):
+    """The target image: ``scene`` rendered (``spp``, ``seed``) with parameter ``key`` set
+    to ``value``; the parameter is restored."""
+    params = mi.traverse(scene)
     v0 = type(params[key])(params[key])
-    params[key] = target_value
+    params[key] = value
     params.update()
-    target = mi.render(sc, spp=512, seed=99)
+    target = mi.render(scene, spp=spp, seed=seed)
     params[key] = v0
     params.update()
-    return check(sc, key, target, eps=eps, repeats=repeats, fd_repeats=fd_repeats)
+    return target

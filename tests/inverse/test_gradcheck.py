@@ -16,9 +16,11 @@ N = 16
 
 
 def _scene(grazing_deg=None):
+    """The recovery plane seen by one camera: straight above (``views`` 1), or at
+    ``grazing_deg`` elevation (sensor 0 of a 2-camera ring: a single view is the top one)."""
     truth = recover.load_height_map(size=N)
-    scene = mi.load_dict(recover.scene_dict(truth, 1, 32, 64, "direct_projective",
-                                            grazing_deg=grazing_deg))
+    scene = mi.load_dict(recover.scene_dict(truth, 1 if grazing_deg is None else 2, 32, 64,
+                                            "direct_projective", grazing_deg=grazing_deg))
     target = mi.render(scene, spp=512, seed=99)
     params = mi.traverse(scene)
     params[recover.KEY] = mi.TensorXf((0.25 + 0.5 * truth)[..., None])   # a squashed map
@@ -26,29 +28,22 @@ def _scene(grazing_deg=None):
     return scene, target
 
 
-def _assert_matches(r, rel):
-    """Sign always right; |AD - FD| within ``rel`` |FD| plus 3 standard errors of the AD
-    mean (its noise measured over the seeds: the part of the error the samples explain)."""
-    assert r["grad_finite"]
-    assert abs(r["fd"]) > 0 and np.sign(r["ad"]) == np.sign(r["fd"]), r
-    assert abs(r["ad"] - r["fd"]) <= rel * abs(r["fd"]) + 3 * r["ad_noise"] / np.sqrt(3), r
-
-
 def test_texel_gradient_matches_finite_differences(variant):
-    # measured: AD within 14 % of FD with the single-seed AD noise at 8 % of |FD|
+    # one 256-spp central difference of this bump scatters by ~12 % of its value, one 64-spp
+    # AD value by ~9 %: 8 seeds of each bring the standard error of AD - FD to ~5 %
     scene, target = _scene()
     r = gradcheck.check(scene, recover.KEY, target,
                         gradcheck.texel_bump((N, N, 1), (N // 2, N // 2), 1.5), eps=0.05,
-                        repeats=3)
+                        repeats=8, fd_repeats=8)
     print(r)
-    _assert_matches(r, 0.1)
+    assert gradcheck.agrees(r, 0.1), r
 
 
 def test_scale_gradient_matches_finite_differences(variant):
     scene, target = _scene()
-    r = gradcheck.check(scene, "surface.scale", target, eps=0.01, repeats=3)
+    r = gradcheck.check(scene, "surface.scale", target, eps=0.01, repeats=3, fd_repeats=3)
     print(r)
-    _assert_matches(r, 0.05)
+    assert gradcheck.agrees(r, 0.05), r
 
 
 @pytest.mark.parametrize("case", ["zero_height", "grazing"])
@@ -64,3 +59,13 @@ def test_gradients_are_finite_at_zero_height_and_grazing_views(variant, case):
     dr.backward(dr.mean(dr.square(image - target), axis=None))
     g = np.asarray(dr.grad(params[recover.KEY]))
     assert np.all(np.isfinite(g)) and np.count_nonzero(g) > N * N // 4
+    # and a gradient agrees with the central differences there (sign, 10 % + noise): at zero
+    # height scale and midlevel do nothing (the flat plane fills the view: both exactly 0),
+    # so there a texel bump (it tilts the normals)
+    if case == "zero_height":
+        r = gradcheck.check(scene, recover.KEY, target, gradcheck.texel_bump(
+            (N, N, 1), (N // 2, N // 2), 1.5), eps=0.05, repeats=8, fd_repeats=8)
+    else:
+        r = gradcheck.check(scene, "surface.scale", target, eps=0.01, repeats=3, fd_repeats=3)
+    print(case, r)
+    assert gradcheck.agrees(r, 0.1), r
