@@ -88,7 +88,8 @@ def sphere_scene(height: dict, integrator: str = "direct_projective", light=SIDE
                  camera=CAMERA, up=(0, 0, 1), image_size: int = 32, spp: int = 64,
                  **shape) -> mi.Scene:
     """A ``displaced`` shape (key ``ball``; default: unit sphere, ``resolution`` 48,
-    ``scale`` 0.1, ``midlevel`` 0.5; ``shape`` overrides, a ``base`` with its own settings) over the texture dict ``height``,
+    ``scale`` 0.1, ``midlevel`` 0.5; ``shape`` overrides, a ``base`` or ``dicing_rate`` with
+    its own settings; the camera's id is ``sensor``) over the texture dict ``height``,
     one point light (intensity 20) at ``light``, one 35-degree camera at ``camera`` looking
     at the origin, ``image_size``^2 box-filtered pixels.
 
@@ -109,7 +110,8 @@ def sphere_scene(height: dict, integrator: str = "direct_projective", light=SIDE
         "light": {"type": "point", "position": list(light),
                   "intensity": {"type": "rgb", "value": 20}},
         "ball": {"type": "displaced", "height": height, "scale": 0.1, "midlevel": 0.5,
-                 **({} if "base" in shape else {"base": "sphere", "resolution": 48}),
+                 **({} if "base" in shape else {"base": "sphere"}),
+                 **({} if {"base", "dicing_rate"} & set(shape) else {"resolution": 48}),
                  **shape}})
 
 
