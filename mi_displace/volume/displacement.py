@@ -103,7 +103,9 @@ class SampledMap:
             raise ValueError("displacement map: D is not finite on its grid (check the map parameters)")
         self.scale = float(np.abs(d).max())
         d = quantise(d, bits, self.scale)
-        self.max_abs = np.abs(d).reshape(-1, 3).max(0)
+        # signed range of the stored D per axis (0 included: lanes outside a bounded grid)
+        self.d_min = np.minimum(d.reshape(-1, 3).min(0), 0.0)
+        self.d_max = np.maximum(d.reshape(-1, 3).max(0), 0.0)
         if smoothing > 0 and alpha.min() < 1:
             alpha = gaussian_filter(alpha, sigma=smoothing, mode="nearest")
         alpha = quantise_unit(alpha, bits).astype(np.float64)
@@ -137,14 +139,21 @@ class SampledMap:
         """(D, α_s, Jᵀ or None, ∇α_s or None) at world points p' (world units); lanes outside
         ``active``, or outside a bounded grid, read nothing (D = 0, α = 1, J = 0 there)."""
         u = self._coords(p)
+        if not self.bounded:
+            return self._read(u, normals, alpha_gradient, active)
         # outside the grid (plus a node) every channel is the clamped face value: D = 0, α = 1
-        # for bounded maps, so those lanes skip the reads (masked gathers touch no memory)
-        inside = dr.all((u > -0.5 / mi.ScalarVector3f(self.res)) & (u < 1 + 0.5 / mi.ScalarVector3f(self.res)))
-        active = inside & active if self.bounded else active
+        # for bounded maps, so a symbolic branch skips the reads (on the LLVM backend too: a
+        # packet of samples with none inside the map's box jumps over it)
+        half = 0.5 / mi.ScalarVector3f(self.res)
+        inside = dr.all((u > -half) & (u < 1 + half)) & active
+        return dr.if_stmt(args=(u,), cond=inside, label="volume_dk_lookup",
+                          true_fn=lambda u: self._read(u, normals, alpha_gradient),
+                          false_fn=lambda u: self._outside(u, normals, alpha_gradient))
+
+    def _read(self, u, normals, alpha_gradient, active=True):
+        """The texture reads of :meth:`lookup` at texture coordinates u."""
         t = self.disp.eval(u, active)
         d, alpha = mi.Vector3f(t[0], t[1], t[2]), 1.0 - t[3]
-        if self.bounded:
-            d, alpha = dr.select(active, d, 0.0), dr.select(active, alpha, 1.0)
         if not normals:
             return d, alpha, None, None
         j = self.jac.eval(u, active)
@@ -153,6 +162,15 @@ class SampledMap:
             return d, alpha, jac_t, None
         g = self.galpha.eval(u, active)
         return d, alpha, jac_t, mi.Vector3f(g[0], g[1], g[2])
+
+    @staticmethod
+    def _outside(u, normals, alpha_gradient):
+        """What a bounded grid holds outside itself: D = 0, α = 1, J = 0, ∇α = 0."""
+        zero = dr.zeros(mi.Float, dr.width(u.x))
+        d, alpha = mi.Vector3f(zero), zero + 1.0
+        if not normals:
+            return d, alpha, None, None
+        return d, alpha, mi.Matrix3f(zero), (mi.Vector3f(zero) if alpha_gradient else None)
 
 
 def padded_box(lo, hi, res, smoothing) -> tuple[np.ndarray, np.ndarray]:
@@ -292,18 +310,21 @@ class DisplacementChain:
             q, alpha = q + d, alpha * a
         return Lookup(q, alpha, B, galpha)
 
-    def max_displacement(self) -> np.ndarray:
-        """Per-axis bound on |p - p'| over the chain (sum of each D_k's largest component)."""
-        total = np.zeros(3)
+    def displacement_range(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-axis bounds (low (3,), high (3,)) on p - p' over the chain: the sums of each
+        D_k's smallest and largest stored component (trilinear interpolation stays within
+        its nodes)."""
+        low, high = np.zeros(3), np.zeros(3)
         for s in self.sampled_maps():
-            total += s.max_abs
-        return total
+            low, high = low + s.d_min, high + s.d_max
+        return low, high
 
     def proxy_box(self, lo, hi) -> tuple[np.ndarray, np.ndarray]:
-        """Bounding box of the displaced object (§4.2's proxy): any p' with p = G(p') in
-        [lo, hi] lies within the summed largest displacements of it."""
-        grow = self.max_displacement()
-        return np.asarray(lo, float) - grow, np.asarray(hi, float) + grow
+        """Bounding box of the displaced object (§4.2's proxy): p' = p - (p - p') with p in
+        [lo, hi] and p - p' within :meth:`displacement_range`, so only the side that matter
+        moves to grows."""
+        low, high = self.displacement_range()
+        return np.asarray(lo, float) - high, np.asarray(hi, float) - low
 
     def nbytes(self) -> int:
         return sum(s.nbytes() for s in self.sampled_maps())

@@ -118,7 +118,7 @@ class DisplacedVolume:
                 g.append((self.smooth_field(p + step, active) - self.smooth_field(p - step, active)) / (2 * h))
             return safe_normalize(-mi.Vector3f(g[0], g[1], g[2]), fallback)
         reusable = lookup is not None and lookup.B is not None and (method != "blend" or lookup.galpha is not None)
-        r = lookup if reusable else self.chain.approximate(p, True, active)
+        r = lookup if reusable else self.chain.approximate(p, True, active, alpha_gradient=method == "blend")
         grad = self.obj.gradient(r.p, active)
         if method == "gradient":
             return safe_normalize(-grad, fallback)
