@@ -7,7 +7,7 @@ over the map's support box (node-centred grid, clamp-to-edge addressing):
 * ``disp``: the inverse displacement M D(M⁻¹ p') in world units and 1 - α_s (4 channels;
   1 - α so that an all-kept map interpolates to exactly α = 1), α_s the α mask smoothed by a
   Gaussian of ``smoothing`` voxels (§5), all quantised to ``bits`` (8, 16 or 32 = float):
-  D normalised to [-1, 1] by its largest component, as the paper's GPU textures;
+  D normalised to [-1, 1] by its largest component (signed normalised: D = 0 stays exact);
 * ``jac``: J_D of the world map by central differences of the *stored* D_k at the voxel
   spacing (9 channels); B = (I + J_D)ᵀ of eq. 6 is formed at lookup (so J = 0 gives B = I
   exactly);
@@ -45,12 +45,13 @@ def check_resolution(res, what: str) -> tuple[int, int, int]:
 
 
 def quantise(values: np.ndarray, bits: int, scale: float) -> np.ndarray:
-    """Store ``values`` in [-scale, scale] at ``bits`` (8/16: unsigned normalised, 32: float)."""
+    """Store ``values`` in [-scale, scale] at ``bits`` (8/16: signed normalised, 2^(bits-1) - 1
+    steps each side, as GPU snorm formats, so that 0 and ±scale stay exact; 32: float)."""
     if bits == 32 or scale == 0:
         return values.astype(np.float32)
-    levels = 2 ** bits - 1
-    q = np.round((np.clip(values / scale, -1, 1) + 1) * 0.5 * levels)
-    return ((q / levels * 2 - 1) * scale).astype(np.float32)
+    levels = 2 ** (bits - 1) - 1
+    q = np.round(np.clip(values / scale, -1, 1) * levels)
+    return (q / levels * scale).astype(np.float32)
 
 
 def quantise_unit(values: np.ndarray, bits: int) -> np.ndarray:
@@ -119,11 +120,11 @@ class SampledMap:
         self.jac = _texture(jac.reshape(*shape, 9))
         self.galpha = _texture(galpha)
         self.voxels = int(np.prod(res))
-        # every face of the grid holds D = 0, α = 1, J = 0 (then outside reads may be skipped)
-        faces = [d[0], d[-1], d[:, 0], d[:, -1], d[:, :, 0], d[:, :, -1]]
-        alpha_faces = [alpha[0], alpha[-1], alpha[:, 0], alpha[:, -1], alpha[:, :, 0], alpha[:, :, -1]]
-        self.bounded = all(not f.any() for f in faces) and all((f == 1).all() for f in alpha_faces) \
-            and not jac[[0, -1]].any() and not jac[:, [0, -1]].any() and not jac[:, :, [0, -1]].any()
+        # axes along which both faces of the grid hold D = 0, α = 1, J = 0, ∇α = 0: beyond
+        # them clamp-to-edge reads give exactly those, so lookups there may skip the reads
+        zero = np.concatenate([d, 1.0 - alpha[..., None], jac.reshape(*shape, 9), galpha], axis=-1)
+        self.bounded_axes = [a for a in range(3)
+                             if not np.take(zero, [0, -1], axis=2 - a).any()]
 
     def nbytes(self) -> int:
         """Texture bytes at the stored bit depth (D 3 + α 1 + J 9 + ∇α 3 channels)."""
@@ -137,15 +138,18 @@ class SampledMap:
 
     def lookup(self, p: mi.Point3f, normals: bool, active=True, alpha_gradient=True):
         """(D, α_s, Jᵀ or None, ∇α_s or None) at world points p' (world units); lanes outside
-        ``active``, or outside a bounded grid, read nothing (D = 0, α = 1, J = 0 there)."""
+        ``active``, or beyond the grid along a bounded axis, read nothing (D = 0, α = 1, J = 0
+        there)."""
         u = self._coords(p)
-        if not self.bounded:
+        if not self.bounded_axes:
             return self._read(u, normals, alpha_gradient, active)
-        # outside the grid (plus a node) every channel is the clamped face value: D = 0, α = 1
-        # for bounded maps, so a symbolic branch skips the reads (on the LLVM backend too: a
-        # packet of samples with none inside the map's box jumps over it)
+        # beyond a bounded axis' faces (plus half a node) every channel is the clamped face value,
+        # D = 0, α = 1: a symbolic branch skips the reads there (on the LLVM backend too, a
+        # packet of samples with none inside the map's region jumps over it)
         half = 0.5 / mi.ScalarVector3f(self.res)
-        inside = dr.all((u > -half) & (u < 1 + half)) & active
+        inside = active
+        for a in self.bounded_axes:
+            inside = inside & (u[a] > -half[a]) & (u[a] < 1 + half[a])
         return dr.if_stmt(args=(u,), cond=inside, label="volume_dk_lookup",
                           true_fn=lambda u: self._read(u, normals, alpha_gradient),
                           false_fn=lambda u: self._outside(u, normals, alpha_gradient))
@@ -165,7 +169,7 @@ class SampledMap:
 
     @staticmethod
     def _outside(u, normals, alpha_gradient):
-        """What a bounded grid holds outside itself: D = 0, α = 1, J = 0, ∇α = 0."""
+        """What the grid holds beyond a bounded axis: D = 0, α = 1, J = 0, ∇α = 0."""
         zero = dr.zeros(mi.Float, dr.width(u.x))
         d, alpha = mi.Vector3f(zero), zero + 1.0
         if not normals:

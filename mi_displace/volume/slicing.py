@@ -35,7 +35,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.render.raster import _is_ambient, _is_delta, pixel_rays
-from mi_displace.volume.field import NORMALS, DisplacedVolume
+from mi_displace.volume.field import NORMALS, AlbedoField, DisplacedVolume
 
 MODELS = ("scatter", "surface")
 #: Front-to-back compositing stops once the transmittance is below this.
@@ -45,7 +45,9 @@ MAX_SLICES = 8192
 
 
 class SliceSettings:
-    """Renderer settings (module docstring); ``spacing`` in object voxels."""
+    """Renderer settings (module docstring); ``spacing`` in object voxels; ``albedo`` a
+    constant or an :class:`~mi_displace.volume.field.AlbedoField` (then it is also the
+    surface model's reflectance in place of ``color``)."""
 
     def __init__(self, model="scatter", normals="jacobian", spacing=1.0, albedo=0.8,
                  color=(0.8, 0.7, 0.55), iso=0.5, sharpness=4.0, shadows=True,
@@ -56,13 +58,15 @@ class SliceSettings:
             raise ValueError(f"normals: must be one of {NORMALS}, got {normals!r}")
         if not (math.isfinite(spacing) and spacing > 0):
             raise ValueError(f"spacing: must be > 0 voxels, got {spacing}")
-        if not 0 <= albedo <= 1:
-            raise ValueError(f"albedo: must lie in [0, 1], got {albedo}")
+        self.albedo_field = albedo if isinstance(albedo, AlbedoField) else None
+        if self.albedo_field is None and not 0 <= albedo <= 1:
+            raise ValueError(f"albedo: must lie in [0, 1] or be an albedo volume, got {albedo!r}")
         if not (0 < iso < 1 and sharpness > 0):
             raise ValueError(f"iso must lie in (0, 1) and sharpness > 0, got {iso}, {sharpness}")
         if aa < 1:
             raise ValueError(f"aa: must be >= 1, got {aa}")
-        self.model, self.normals, self.spacing, self.albedo = model, normals, float(spacing), float(albedo)
+        self.model, self.normals, self.spacing = model, normals, float(spacing)
+        self.albedo = 1.0 if self.albedo_field is not None else float(albedo)
         self.color, self.iso, self.sharpness = tuple(float(c) for c in color), float(iso), float(sharpness)
         self.shadows, self.light_resolution, self.aa = bool(shadows), light_resolution, int(aa)
 
@@ -207,6 +211,8 @@ def _slice_frame(sensor: mi.Sensor, lo, hi, spacing):
 def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSettings) -> mi.TensorXf:
     """Render the displaced volume by slicing; returns a (height, width, 3) linear tensor."""
     vol.prepare()
+    if s.albedo_field is not None:
+        s.albedo_field.prepare()
     lo, hi = vol.proxy_box()
     spacing = s.spacing * float(vol.obj.voxel_size.min())
     origin, forward, zmin, count = _slice_frame(sensor, lo, hi, spacing)
@@ -240,6 +246,7 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
         S = mi.Color3f(0.0)
         if s.model == "surface":
             n = vol.normal(x, s.normals, -ray.d)
+        colour = s.albedo_field.albedo(x) if s.albedo_field is not None else None
         for i, e in enumerate(lights):
             it = dr.zeros(mi.Interaction3f)
             it.p = x
@@ -250,10 +257,12 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
                 xl = x + ds.d * bias if s.model == "surface" else x
                 shadow = grid.eval(mi.Point3f((xl - box_lo) / (box_hi - box_lo) * (gn - 1) / gn + 0.5 / gn))[i]
             if s.model == "scatter":
-                S += mi.Color3f(E) * shadow * (s.albedo / (4.0 * dr.pi))
+                S += mi.Color3f(E) * shadow / (4.0 * dr.pi)
             else:
                 S += mi.Color3f(E) * shadow * dr.maximum(dr.dot(n, ds.d), 0.0) / dr.pi
-        return rho * (S + amb) if s.model == "surface" else S
+        if s.model == "surface":
+            return (colour if colour is not None else rho) * (S + amb)
+        return (colour if colour is not None else s.albedo) * S
 
     def cond(k, T, L):
         return hit & (k <= k1) & (T > EARLY_STOP)
