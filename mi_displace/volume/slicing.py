@@ -8,8 +8,11 @@ fragment on slice k is where its ray meets that plane; it is mapped through D_k/
 Compositing runs front to back with early termination once the transmittance drops below
 :data:`EARLY_STOP` — the same sum as back-to-front "over" blending, stopped when what remains
 can change a pixel by less than that fraction — and with empty-space skipping: slices inside
-cells of :func:`occupancy` that hold no matter are jumped over (the paper's GPU had neither).  The loop over slices is one Dr.Jit symbolic
-loop; nothing is random, so renders are bit-identical.
+the empty cells of :func:`occupancy` are jumped over, a whole empty cube of cells at a time
+(the paper's GPU had neither).  The D_k/O lookups run only in occupied cells and the shading
+only at visible samples, in symbolic branches (``dr.if_stmt``), which skip a whole SIMD packet
+on the LLVM backend as a warp on CUDA.  The loop over slices is one Dr.Jit symbolic loop;
+nothing is random, so renders are bit-identical.
 
 Light models (``model``):
 
