@@ -99,3 +99,25 @@ def test_albedo_bad_input(variant):
         _albedo(colour, RED, BLUE)                       # an albedo volume is no density source
     with pytest.raises(RuntimeError, match="albedo"):
         _scene("volume_slicer", vol, albedo=mi.load_dict({"type": "constvolume"}))
+
+
+def test_albedo_follows_an_edit_of_its_source(variant):
+    """The albedo volume shares its source's chain: a mi.traverse edit of the source's map
+    (slabs over [-0.5, 0.5]^3: the upper half lifts by the gap) moves the colour too, and the
+    albedo volume itself exposes no map parameters."""
+    m = mi.ScalarTransform4f().translate([-0.5, -0.5, -0.5])
+    vol = _volume(maps=[("slabs", {"count": 2, "gap": 0.0})], mode="reference", map0_to_world=m)
+    colour = _albedo(vol, RED, BLUE, albedo_range_low=0.0, albedo_range_high=0.6)
+    assert len(mi.traverse(colour)) == 0
+    it = mi.Interaction3f()
+    it.p = _p([[0.0, 0.0, 0.57]])                   # above the shell: no matter, low colour
+    np.testing.assert_allclose(np.array(colour.eval(it))[:, 0], RED, atol=1e-6)
+    params = mi.traverse(vol)
+    params["map0_gap"] = 0.3
+    params.update()
+    # now it shows the shell's top at z = 0.27 (piggy bank density 0.6 there)
+    shell = float(vol.volume.obj.density(_p([[0.0, 0.0, 0.27]]))[0])
+    assert shell > 0.3
+    t = min(shell / 0.6, 1.0)
+    expected = np.array(RED) + t * (np.array(BLUE) - np.array(RED))
+    np.testing.assert_allclose(np.array(colour.eval(it))[:, 0], expected, atol=1e-5)
