@@ -8,7 +8,8 @@
         <string name="model" value="scatter"/>        <!-- scatter (matches volpath) | surface -->
         <string name="normals" value="jacobian"/>     <!-- gradient | jacobian | blend | fd (surface) -->
         <float name="spacing" value="1.0"/>           <!-- slice distance, object voxels -->
-        <float name="albedo" value="0.8"/>            <!-- scatter: the medium's albedo -->
+        <float name="albedo" value="0.8"/>            <!-- scatter: the medium's albedo, or -->
+        <!-- <ref name="albedo" id="..."/>               a displaced_volume output="albedo" (also the surface colour) -->
         <rgb name="color" value="0.8, 0.7, 0.55"/>    <!-- surface: diffuse reflectance -->
         <float name="iso" value="0.5"/>               <!-- surface: iso value of tau(O) -->
         <boolean name="shadows" value="true"/>
@@ -36,9 +37,15 @@ class VolumeSlicer(mi.SamplingIntegrator):
             raise ValueError("volume_slicer: needs <ref name=\"volume\" id=...> to a displaced_volume")
         self.plugin = volume
         color = props.get("color", None)
+        albedo = props.get("albedo", 0.8)
+        if not isinstance(albedo, (int, float)):
+            if getattr(albedo, "albedo", None) is None:
+                raise ValueError("volume_slicer: 'albedo' must be a number or a <ref> to a displaced_volume "
+                                 "with output=\"albedo\"")
+            albedo = albedo.albedo
         self.settings = slicing.SliceSettings(
             model=props.get("model", "scatter"), normals=props.get("normals", "jacobian"),
-            spacing=float(props.get("spacing", 1.0)), albedo=float(props.get("albedo", 0.8)),
+            spacing=float(props.get("spacing", 1.0)), albedo=albedo,
             color=(0.8, 0.7, 0.55) if color is None else tuple(mi.ScalarColor3f(color)),
             iso=float(props.get("iso", 0.5)), sharpness=float(props.get("sharpness", 4.0)),
             shadows=bool(props.get("shadows", True)),

@@ -163,6 +163,7 @@ VOLUME_BOUNDS = {
     "volume_composite_wave_peel": (0.0229, "docs/volume.md, compares: wave then peel FLIP 0.0229"),
     "volume_composite_peel_wave": (0.0230, "docs/volume.md, compares: peel then wave FLIP 0.0230"),
     "volume_piggy_surface": (0.0553, "docs/volume.md, compares: volume_piggy_surface FLIP 0.0553"),
+    "volume_piggy_albedo": (0.0104, "docs/volume.md, compares: volume_piggy_albedo FLIP 0.0104"),
 }
 
 

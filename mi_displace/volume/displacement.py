@@ -7,7 +7,7 @@ over the map's support box (node-centred grid, clamp-to-edge addressing):
 * ``disp``: the inverse displacement M D(M⁻¹ p') in world units and 1 - α_s (4 channels;
   1 - α so that an all-kept map interpolates to exactly α = 1), α_s the α mask smoothed by a
   Gaussian of ``smoothing`` voxels (§5), all quantised to ``bits`` (8, 16 or 32 = float):
-  D normalised to [-1, 1] by its largest component, as the paper's GPU textures;
+  D normalised to [-1, 1] by its largest component (signed normalised: D = 0 stays exact);
 * ``jac``: J_D of the world map by central differences of the *stored* D_k at the voxel
   spacing (9 channels); B = (I + J_D)ᵀ of eq. 6 is formed at lookup (so J = 0 gives B = I
   exactly);
@@ -45,12 +45,13 @@ def check_resolution(res, what: str) -> tuple[int, int, int]:
 
 
 def quantise(values: np.ndarray, bits: int, scale: float) -> np.ndarray:
-    """Store ``values`` in [-scale, scale] at ``bits`` (8/16: unsigned normalised, 32: float)."""
+    """Store ``values`` in [-scale, scale] at ``bits`` (8/16: signed normalised, 2^(bits-1) - 1
+    steps each side, as GPU snorm formats, so that 0 and ±scale stay exact; 32: float)."""
     if bits == 32 or scale == 0:
         return values.astype(np.float32)
-    levels = 2 ** bits - 1
-    q = np.round((np.clip(values / scale, -1, 1) + 1) * 0.5 * levels)
-    return ((q / levels * 2 - 1) * scale).astype(np.float32)
+    levels = 2 ** (bits - 1) - 1
+    q = np.round(np.clip(values / scale, -1, 1) * levels)
+    return (q / levels * scale).astype(np.float32)
 
 
 def quantise_unit(values: np.ndarray, bits: int) -> np.ndarray:
@@ -103,7 +104,9 @@ class SampledMap:
             raise ValueError("displacement map: D is not finite on its grid (check the map parameters)")
         self.scale = float(np.abs(d).max())
         d = quantise(d, bits, self.scale)
-        self.max_abs = np.abs(d).reshape(-1, 3).max(0)
+        # signed range of the stored D per axis (0 included: lanes outside a bounded grid)
+        self.d_min = np.minimum(d.reshape(-1, 3).min(0), 0.0)
+        self.d_max = np.maximum(d.reshape(-1, 3).max(0), 0.0)
         if smoothing > 0 and alpha.min() < 1:
             alpha = gaussian_filter(alpha, sigma=smoothing, mode="nearest")
         alpha = quantise_unit(alpha, bits).astype(np.float64)
@@ -117,11 +120,11 @@ class SampledMap:
         self.jac = _texture(jac.reshape(*shape, 9))
         self.galpha = _texture(galpha)
         self.voxels = int(np.prod(res))
-        # every face of the grid holds D = 0, α = 1, J = 0 (then outside reads may be skipped)
-        faces = [d[0], d[-1], d[:, 0], d[:, -1], d[:, :, 0], d[:, :, -1]]
-        alpha_faces = [alpha[0], alpha[-1], alpha[:, 0], alpha[:, -1], alpha[:, :, 0], alpha[:, :, -1]]
-        self.bounded = all(not f.any() for f in faces) and all((f == 1).all() for f in alpha_faces) \
-            and not jac[[0, -1]].any() and not jac[:, [0, -1]].any() and not jac[:, :, [0, -1]].any()
+        # axes along which both faces of the grid hold D = 0, α = 1, J = 0, ∇α = 0: beyond
+        # them clamp-to-edge reads give exactly those, so lookups there may skip the reads
+        zero = np.concatenate([d, 1.0 - alpha[..., None], jac.reshape(*shape, 9), galpha], axis=-1)
+        self.bounded_axes = [a for a in range(3)
+                             if not np.take(zero, [0, -1], axis=2 - a).any()]
 
     def nbytes(self) -> int:
         """Texture bytes at the stored bit depth (D 3 + α 1 + J 9 + ∇α 3 channels)."""
@@ -135,16 +138,26 @@ class SampledMap:
 
     def lookup(self, p: mi.Point3f, normals: bool, active=True, alpha_gradient=True):
         """(D, α_s, Jᵀ or None, ∇α_s or None) at world points p' (world units); lanes outside
-        ``active``, or outside a bounded grid, read nothing (D = 0, α = 1, J = 0 there)."""
+        ``active``, or beyond the grid along a bounded axis, read nothing (D = 0, α = 1, J = 0
+        there)."""
         u = self._coords(p)
-        # outside the grid (plus a node) every channel is the clamped face value: D = 0, α = 1
-        # for bounded maps, so those lanes skip the reads (masked gathers touch no memory)
-        inside = dr.all((u > -0.5 / mi.ScalarVector3f(self.res)) & (u < 1 + 0.5 / mi.ScalarVector3f(self.res)))
-        active = inside & active if self.bounded else active
+        if not self.bounded_axes:
+            return self._read(u, normals, alpha_gradient, active)
+        # beyond a bounded axis' faces (plus half a node) every channel is the clamped face value,
+        # D = 0, α = 1: a symbolic branch skips the reads there (on the LLVM backend too, a
+        # packet of samples with none inside the map's region jumps over it)
+        half = 0.5 / mi.ScalarVector3f(self.res)
+        inside = active
+        for a in self.bounded_axes:
+            inside = inside & (u[a] > -half[a]) & (u[a] < 1 + half[a])
+        return dr.if_stmt(args=(u,), cond=inside, label="volume_dk_lookup",
+                          true_fn=lambda u: self._read(u, normals, alpha_gradient),
+                          false_fn=lambda u: self._outside(u, normals, alpha_gradient))
+
+    def _read(self, u, normals, alpha_gradient, active=True):
+        """The texture reads of :meth:`lookup` at texture coordinates u."""
         t = self.disp.eval(u, active)
         d, alpha = mi.Vector3f(t[0], t[1], t[2]), 1.0 - t[3]
-        if self.bounded:
-            d, alpha = dr.select(active, d, 0.0), dr.select(active, alpha, 1.0)
         if not normals:
             return d, alpha, None, None
         j = self.jac.eval(u, active)
@@ -153,6 +166,15 @@ class SampledMap:
             return d, alpha, jac_t, None
         g = self.galpha.eval(u, active)
         return d, alpha, jac_t, mi.Vector3f(g[0], g[1], g[2])
+
+    @staticmethod
+    def _outside(u, normals, alpha_gradient):
+        """What the grid holds beyond a bounded axis: D = 0, α = 1, J = 0, ∇α = 0."""
+        zero = dr.zeros(mi.Float, dr.width(u.x))
+        d, alpha = mi.Vector3f(zero), zero + 1.0
+        if not normals:
+            return d, alpha, None, None
+        return d, alpha, mi.Matrix3f(zero), (mi.Vector3f(zero) if alpha_gradient else None)
 
 
 def padded_box(lo, hi, res, smoothing) -> tuple[np.ndarray, np.ndarray]:
@@ -292,18 +314,21 @@ class DisplacementChain:
             q, alpha = q + d, alpha * a
         return Lookup(q, alpha, B, galpha)
 
-    def max_displacement(self) -> np.ndarray:
-        """Per-axis bound on |p - p'| over the chain (sum of each D_k's largest component)."""
-        total = np.zeros(3)
+    def displacement_range(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-axis bounds (low (3,), high (3,)) on p - p' over the chain: the sums of each
+        D_k's smallest and largest stored component (trilinear interpolation stays within
+        its nodes)."""
+        low, high = np.zeros(3), np.zeros(3)
         for s in self.sampled_maps():
-            total += s.max_abs
-        return total
+            low, high = low + s.d_min, high + s.d_max
+        return low, high
 
     def proxy_box(self, lo, hi) -> tuple[np.ndarray, np.ndarray]:
-        """Bounding box of the displaced object (§4.2's proxy): any p' with p = G(p') in
-        [lo, hi] lies within the summed largest displacements of it."""
-        grow = self.max_displacement()
-        return np.asarray(lo, float) - grow, np.asarray(hi, float) + grow
+        """Bounding box of the displaced object (§4.2's proxy): p' = p - (p - p') with p in
+        [lo, hi] and p - p' within :meth:`displacement_range`, so only the side that matter
+        moves to grows."""
+        low, high = self.displacement_range()
+        return np.asarray(lo, float) - high, np.asarray(hi, float) - low
 
     def nbytes(self) -> int:
         return sum(s.nbytes() for s in self.sampled_maps())

@@ -118,7 +118,7 @@ class DisplacedVolume:
                 g.append((self.smooth_field(p + step, active) - self.smooth_field(p - step, active)) / (2 * h))
             return safe_normalize(-mi.Vector3f(g[0], g[1], g[2]), fallback)
         reusable = lookup is not None and lookup.B is not None and (method != "blend" or lookup.galpha is not None)
-        r = lookup if reusable else self.chain.approximate(p, True, active)
+        r = lookup if reusable else self.chain.approximate(p, True, active, alpha_gradient=method == "blend")
         grad = self.obj.gradient(r.p, active)
         if method == "gradient":
             return safe_normalize(-grad, fallback)
@@ -131,3 +131,50 @@ class DisplacedVolume:
 
     def nbytes(self) -> dict:
         return {"object": self.obj.nbytes(), "maps": self.chain.nbytes()}
+
+
+class AlbedoField:
+    """The colour of a displaced object (the ``albedo`` of a ``heterogeneous`` medium, or the
+    slicer's reflectance): a colour transfer of a scalar field F read at the *same* pre-image
+    p = G(p') as the density, so that colour moves with the displacement, cut faces show the
+    colour of what was cut and the inside shows its own colour:
+
+        albedo(p') = low + (high - low) · clip((F(p) - a) / (b - a), 0, 1)
+
+    F is the volume's own object O (a transfer function on density) or a second object volume
+    on its own world box (e.g. a label field), read trilinearly, 0 outside its box.
+
+    Args:
+        volume: the :class:`DisplacedVolume` whose chain and mode give p.
+        low, high: RGB albedo at F <= a and F >= b, each in [0, 1].
+        value_range: (a, b), a < b; default the volume's (tf_low, tf_high).
+        field: the second object volume F, or None for O.
+    """
+
+    def __init__(self, volume: DisplacedVolume, low, high, value_range=None, field: ObjectVolume | None = None):
+        low, high = (np.asarray(c, float).reshape(-1) for c in (low, high))
+        for name, c in (("albedo_low", low), ("albedo_high", high)):
+            if c.shape != (3,) or not (np.isfinite(c).all() and (c >= 0).all() and (c <= 1).all()):
+                raise ValueError(f"{name}: an RGB albedo needs three values in [0, 1], got {c}")
+        a, b = (volume.tf_low, volume.tf_high) if value_range is None else (float(v) for v in value_range)
+        if not (np.isfinite(a) and np.isfinite(b) and b > a):
+            raise ValueError(f"albedo_range_low/high: need finite low < high, got {a}, {b}")
+        self.volume, self.low, self.high, self.range = volume, low, high, (a, b)
+        self.field = field if field is not None else volume.obj
+
+    def prepare(self) -> None:
+        """Build the textures now (not inside a symbolic loop)."""
+        self.volume.prepare()
+        self.field.textures()
+
+    def albedo(self, p: mi.Point3f, lookup=None) -> mi.Color3f:
+        """RGB albedo at world points p' (``lookup``: a pre-image lookup of p' to reuse)."""
+        r = lookup if lookup is not None else self.volume.lookup(p)
+        a, b = self.range
+        t = dr.clip((self.field.density(r.p) - a) / (b - a), 0.0, 1.0)
+        low, high = mi.Color3f(self.low.tolist()), mi.Color3f((self.high - self.low).tolist())
+        return dr.fma(t, high, low)   # exact where low == high (a constant albedo)
+
+    def max(self) -> float:
+        return float(max(self.low.max(), self.high.max()))
+

@@ -4,6 +4,8 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
+from volume_helpers import points as _points
+
 
 def _volume(mode="approximation", maps=None, **kw):
     d = {"type": "displaced_volume", "procedural": "piggy_bank", "resolution": 32, "mode": mode,
@@ -128,3 +130,30 @@ def test_medium_volume_refuses_to_outgrow_its_box(variant):
     params["map0_angle"] = 80.0
     params.update()
     assert roomy.volume.chain.maps[0].params["angle"] == 80.0
+
+
+def test_fast_paths_agree_with_the_slow_ones(variant, monkeypatch):
+    """A Gaussian pull over one quadrant of the piggy bank (the map region is partial): the
+    symbolic branch that skips D_k reads outside the map's box, the occupancy skipping and the
+    shading branch change no bit against reading the D_k everywhere and marching every slice."""
+    from mi_displace.volume import slicing
+
+    m = mi.ScalarTransform4f().translate([0.0, -0.5, 0.0]).scale([0.5, 0.5, 0.5])
+    vol = _volume(maps=[("gaussian", {"amount": 0.6})], map0_to_world=m)
+    dk = vol.volume.chain.sampled_maps()[0]
+    assert dk.bounded_axes == [0, 1, 2]
+    p = np.random.default_rng(3).uniform(-0.6, 0.6, (20000, 3))
+    fast = vol.volume.chain.approximate(_points(p), True)
+    inside = np.array(dk._coords(_points(p)).x)
+    assert 0.1 < ((inside > 0) & (inside < 1)).mean() < 0.9          # lanes both sides of the box
+    props = ({"model": "scatter"}, {"model": "surface", "normals": "jacobian"}, {"model": "surface", "normals": "blend"})
+    images = [_render(_scene("volume_slicer", vol, **kw)) for kw in props]
+    monkeypatch.setattr(dk, "bounded_axes", [])                        # read the D_k everywhere
+    slow = vol.volume.chain.approximate(_points(p), True)
+    for a, b in ((fast.p, slow.p), (fast.B, slow.B), (fast.galpha, slow.galpha)):
+        assert np.array_equal(np.array(a), np.array(b))
+    assert np.array_equal(np.array(fast.alpha), np.array(slow.alpha))
+    everywhere = lambda v, s, lo, hi: (np.array([1, 1, 1]), mi.Float([0.0]))   # one occupied cell
+    monkeypatch.setattr(slicing, "occupancy", everywhere)
+    for kw, img in zip(props, images):
+        assert img.max() > 0 and np.array_equal(img, _render(_scene("volume_slicer", vol, **kw))), kw
