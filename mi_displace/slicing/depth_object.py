@@ -293,6 +293,7 @@ class DepthObject:
         self.color_tex = _texture(images.color, nearest=False)
         self.normal_tex = None if images.normal is None else _texture(images.normal, nearest=False)
         self.occupancy = mi.Bool(occupancy(images.alpha(self.hull)).ravel())
+        self.skip_empty = True   # empty-space skipping (same result; off: every plane tested)
         self.stats = {"slices": slices, "hull": self.hull, "resolution": images.resolution,
                       "bytes": images.nbytes()}
 
@@ -362,7 +363,7 @@ class DepthObject:
             m = mi.Vector3f(*[1.0 if j == k else 0.0 for j in range(3)])
             ok, t = first_passing_plane(o, d, m, self.c[k] - self.a + 0.5 * self.delta, self.delta,
                                         t_in, t_out, self.inside, mine, self.n + 2,
-                                        self.skip(o, d))
+                                        self.skip(o, d) if self.skip_empty else None)
             found |= ok
             p = dr.select(ok, o + t * d, p)
         return found, p

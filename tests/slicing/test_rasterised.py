@@ -140,3 +140,42 @@ def test_alpha_and_initial_keys_of_the_zbuffer(variant):
 def dataclass_faces(geom, faces):
     import dataclasses
     return dataclasses.replace(geom, faces=dr.gather(mi.Vector3u, geom.faces, mi.UInt32(faces)))
+
+
+@pytest.mark.parametrize("integrator, follows", [("path", False), ("volpath", True)])
+def test_shadows_onto_other_objects(variant, integrator, follows):
+    """path's shadow rays stop at the volume's boundary (a solid shadow); volpath's
+    next-event estimation passes through null-BSDF surfaces, asking the slicing BSDF's null
+    transmission, so the floor gets the slices' own shadow (bricks, lit through the cut-out
+    mortar).  Truth: the slice walk from each floor point towards the light."""
+    T = mi.ScalarTransform4f
+    wl = np.array([-0.6, 0.0, 1.0]) / np.linalg.norm([-0.6, 0.0, 1.0])   # towards the sun
+    scene = mi.load_dict({
+        "type": "scene", "integrator": {"type": integrator, "max_depth": 3},
+        "obj": {"type": "slicing", "base": "plane", "slices": 16, "direction": "a",
+                "alpha": "ramp", "scale": 0.3, "bsdf": {"type": "diffuse"},
+                "height": {"type": "bricks", "rows": 3, "columns": 2, "mortar": 0.3, "bevel": 0.1},
+                "to_world": T().translate([0, 0, 1.0]) @ T().scale(0.6)},
+        "floor": {"type": "rectangle", "to_world": T().scale(3), "bsdf": {"type": "diffuse"}},
+        "sun": {"type": "directional", "direction": (-wl).tolist(), "irradiance": 3.0},
+        # looking down at the floor east of the object, where its shadow falls
+        "sensor": {"type": "orthographic", "to_world": T().look_at(
+            origin=[0.95, 0, 3], target=[0.95, 0, 0], up=[0, 1, 0]) @ T().scale([0.25, 0.25, 1]),
+            "film": {"type": "hdrfilm", "width": 40, "height": 40}}})
+    img = np.array(mi.render(scene, spp=4))[..., :3].mean(-1)
+    assert np.isfinite(img).all()
+    lit = 0.5 / np.pi * 3.0 * wl[2]                     # the floor's radiance in the sun
+    dark = (img < 0.5 * lit).ravel()
+    # the truth: walk the slices from each pixel's floor point towards the light
+    sensor = scene.sensors()[0]
+    ray, *_ = rasterised.pixel_rays(sensor, 1)
+    o = np.array(ray.o) + np.array(ray.d) * (-np.array(ray.o)[2] / np.array(ray.d)[2])
+    vol = next(s for s in scene.shapes() if hasattr(s, "volume")).volume
+    n = o.shape[1]
+    hit = vol.find(mi.Point3f(*[mi.Float(x.astype(np.float32)) for x in o]),
+                   mi.Vector3f(*[mi.Float(np.full(n, x, np.float32)) for x in wl]),
+                   dr.zeros(mi.UInt32, n), mi.Bool(True))
+    shadow = np.array(hit.found)
+    assert 0.2 < shadow.mean() < 0.8                  # bricks and lit mortar both there
+    agree = (dark == shadow).mean()
+    assert (agree > 0.9) == follows, agree
