@@ -18,9 +18,11 @@ image:
 
 The walk stops at the wall the ray leaves through and Mitsuba continues the ray; the
 rasteriser sees every stretch of the volume at once, with the family chosen at the first
-one (the only difference: rays that pass through a first stretch and meet a second one
-whose entry face would pick another family).  Screen-space slicing (closed-form planes)
-is not rasterised.
+one.  Where they differ: rays that pass through a first stretch and meet a second one
+whose entry face would pick another family, and slices seen edge-on (a view along the
+slices of a forced direction b or c), where the walk's step past each polygon and the
+rasteriser's sliver triangles decide a few pixels differently (measured in
+docs/slicing.md).  Screen-space slicing (closed-form planes) is not rasterised.
 """
 from __future__ import annotations
 
@@ -34,6 +36,7 @@ import numpy as np
 from mi_displace.render import zbuffer
 from mi_displace.render.raster import pixel_rays
 from mi_displace.slicing.sliced import FAMILIES, Hit, SlicedVolume
+from mi_displace.slicing.trace import alpha_test
 
 #: A lane's ray is one of the frame's sample rays when it passes this close to the sample's
 #: ray (relative to 1 + the distance) and points along it within this many grid cells.
@@ -203,7 +206,8 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
                 active = active & dr.gather(mi.Bool, mine, sample, active)
                 b0 = 1.0 - b1 - b2
                 uv = b0 * uvs[0] + b1 * uvs[1] + b2 * uvs[2]
-                return active & volume._test(uv, b0 * ramps[0] + b1 * ramps[1] + b2 * ramps[2])
+                ramp = b0 * ramps[0] + b1 * ramps[1] + b2 * ramps[2]
+                return active & alpha_test(volume.alpha, volume.D(uv), ramp)
 
             return test
 
