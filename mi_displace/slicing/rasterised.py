@@ -155,7 +155,7 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
     # the first wall each sample's ray meets: the proxy face the walk starts from
     walls = volume.walls_scene
     wgeom = walls.geometry()
-    wkeys, wclip = zbuffer.rasterise(view, wgeom, True, aa=aa)
+    wkeys, _ = zbuffer.rasterise(view, wgeom, True, aa=aa)
     covered = wkeys != zbuffer.EMPTY
     third = dr.full(mi.Float, 1 / 3, n)
     bn, su, sv = walls.frame(mi.UInt32(wkeys & low), (third, third), covered)
@@ -168,18 +168,20 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
     # every slice fragment in front of it (its key keeps the depth, an id of all ones)
     initial = dr.full(mi.UInt64, zbuffer.EMPTY, n)
     if volume.opaque_base:
-        def leaving_bottom(tri, active):
-            bottom = active & ((dr.gather(mi.UInt32, walls.flags, tri, active) & 2) != 0)
-            fn = walls.face_normal(tri, bottom)
-            return lambda sample, b1, b2, active: active & bottom & covered_at(sample, active) & (
-                dr.dot(dr.gather(mi.Vector3f, ray.d, sample, active & bottom), fn) > 0)
+        every = dr.arange(mi.UInt32, dr.width(wgeom.faces))
+        bottoms = dr.compress((dr.gather(mi.UInt32, walls.flags, every) & 2) != 0)
+        bgeom = dataclasses.replace(wgeom, faces=dr.gather(mi.Vector3u, wgeom.faces, bottoms))
 
-        covered_at = lambda sample, active: dr.gather(mi.Bool, covered, sample, active)
-        base, _ = zbuffer.rasterise(view, wgeom, True, aa=aa, alpha=leaving_bottom)
+        def leaving(tri, active):   # seen from inside: the ray runs along the outward normal
+            fn = walls.face_normal(dr.gather(mi.UInt32, bottoms, tri, active), active)
+            return lambda sample, b1, b2, active: active & dr.gather(mi.Bool, covered, sample, active) & (
+                dr.dot(dr.gather(mi.Vector3f, ray.d, sample, active), fn) > 0)
+
+        base, bclip = zbuffer.rasterise(view, bgeom, True, aa=aa, alpha=leaving)
         found = base != zbuffer.EMPTY
         tri = mi.UInt32(base & low)
-        bary, p = _resolve(view, aa, wclip, wgeom, tri, found, ray)
-        hit = _store(hit, found, walls, tri, bary, p)
+        bary, p = _resolve(view, aa, bclip, bgeom, tri, found, ray)
+        hit = _store(hit, found, walls, dr.gather(mi.UInt32, bottoms, tri, found), bary, p)
         initial = base | low
         dr.eval(initial, hit.found, hit.p, hit.uv, hit.n, hit.su, hit.sv)
     for index, fam in enumerate(FAMILIES[volume.direction]):   # a, b, c: three at most
