@@ -172,8 +172,10 @@ class Slicing(mi.Mesh):
     def raster_begin(self, sensor: mi.Sensor, aa: int) -> None:
         """Called by the ``raster`` integrator before it draws a frame: rasterise the
         slices at the sensor's samples (:mod:`mi_displace.slicing.rasterised`), unless
-        ``rasterise`` is false or the slices are screen-space planes (then they are walked)."""
-        if self.rasterise and self.volume.direction != "screen":
+        ``rasterise`` is false, the slices are screen-space planes or the sensor is not one
+        the z-buffer projects (perspective, orthographic): then they are walked."""
+        pinhole = sensor.class_name() in ("PerspectiveCamera", "OrthographicCamera")
+        if self.rasterise and pinhole and self.volume.direction != "screen":
             from mi_displace.slicing.rasterised import draw
             self.volume.frame = draw(self.volume, sensor, aa)
 
