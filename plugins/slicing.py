@@ -15,6 +15,7 @@
         <string name="alpha" value="ramp"/>         <!-- basic (default for a) | ramp -->
         <boolean name="ratio_scaling" value="true"/> <!-- §3.4 orthogonal count scaling -->
         <boolean name="draw_base" value="false"/>   <!-- also draw the base polygons (opaque) -->
+        <boolean name="rasterise" value="true"/>    <!-- raster: z-buffer the slices (false: walk) -->
         <bsdf type="diffuse"> ... </bsdf>            <!-- its textures are read at the slice uv -->
     </shape>
 
@@ -22,7 +23,10 @@
 The shape itself is the boundary of the displacement volume (the proxy rays enter); its
 BSDF, made here around the nested material, finds per ray the front-most slice fragment
 that passes the α-test (:mod:`mi_displace.slicing.sliced`) and is a Null pass-through
-where none does, so it works under ``raster`` and ``path`` alike.  Self-shadows come from
+where none does, so it works under ``raster`` and ``path`` alike.  Under ``raster`` the
+slices of a frame are rasterised by our z-buffer beforehand (``raster_begin``; the α-test
+as a fragment discard, :mod:`mi_displace.slicing.rasterised`) and the BSDF shades the
+fragment that won; ``rasterise=false`` walks them by ray queries as under ``path``.  Self-shadows come from
 the slices themselves (a second slice walk towards the light).  ``build_stats`` reports
 the slice counts (what ``auto`` chose), triangles and bytes.
 """
@@ -81,7 +85,7 @@ class SlicingBSDF(MesostructureBSDF):
         third = dr.full(mi.Float, 1 / 3, dr.width(si.t))   # the proxy face's centre (faces
         bn, su, sv = self.model.walls_scene.frame(si.prim_index, (third, third), active)  # = walls)
         choice = self.model.choose(d, dr.normalize(bn), su, sv)
-        hit = self.model.find(origin, d, choice, active)
+        hit = self.model.find_view(origin, d, choice, active)
         normal = self.model.normal(hit)
         si2 = shading_interaction(si, hit.uv, normal, hit.su)
         si2.p = hit.p
@@ -132,6 +136,7 @@ class Slicing(mi.Mesh):
         alpha = str(props.get("alpha", "basic" if direction == "a" else "ramp"))
         ratio_scaling = bool(props.get("ratio_scaling", True))
         draw_base = bool(props.get("draw_base", False))
+        self.rasterise = bool(props.get("rasterise", True))
         sensor = props.get("sensor", None)
         if slices == "auto" and not isinstance(sensor, mi.Sensor):
             raise ValueError("slicing: slices='auto' needs the scene's camera: "
@@ -163,6 +168,20 @@ class Slicing(mi.Mesh):
         self.volume, self.bsdf_ref = volume, bsdf
         self._settings = (direction, alpha, ratio_scaling, draw_base)
         self.build_stats = {**volume.stats, "slices_auto": auto, "build_s": time.perf_counter() - start}
+
+    def raster_begin(self, sensor: mi.Sensor, aa: int) -> None:
+        """Called by the ``raster`` integrator before it draws a frame: rasterise the
+        slices at the sensor's samples (:mod:`mi_displace.slicing.rasterised`), unless
+        ``rasterise`` is false, the slices are screen-space planes or the sensor is not one
+        the z-buffer projects (perspective, orthographic): then they are walked."""
+        pinhole = sensor.class_name() in ("PerspectiveCamera", "OrthographicCamera")
+        if self.rasterise and pinhole and self.volume.direction != "screen":
+            from mi_displace.slicing.rasterised import draw
+            self.volume.frame = draw(self.volume, sensor, aa)
+
+    def raster_end(self) -> None:
+        """Called after the frame: later renders (``path``, another view) walk again."""
+        self.volume.frame = None
 
     def traverse(self, cb):
         super().traverse(cb)

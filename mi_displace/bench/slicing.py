@@ -3,19 +3,28 @@
 All in one process (times are wall seconds; medians of 3 warm runs after a cold one):
 
 * ``render_time_warm_s``: the bricked donut (scenes/slicing_donut.xml) at 512^2, 25 slices,
-  best direction, under ``raster`` with one sample per pixel (as a GPU draws it);
+  best direction, under ``raster`` with one sample per pixel (as a GPU draws it: the slice
+  polygons rasterised by our z-buffer, mi_displace.slicing.rasterised);
   ``build_time_warm_s``: loading it (slice polygons + their BVHs);
+  ``render_time_walk_warm_s``: the same frame with the slices walked by ray queries
+  (``rasterise=false``, the renderer before the z-buffer path; ``speedup_vs_walk``;
+  ``flip_walk_vs_rasterised``: FLIP between the two frames);
+  ``render_time_a_warm_s``: direction a (the 25 surface-aligned slices llvmpipe draws);
+  ``auto_slices``: what ``slices="auto"`` chooses for this view;
 * ``true_displacement_time_warm_s``: the same donut tessellated by ``displaced`` at
   ``resolution`` 2048 (converged: ``converged_flip`` = FLIP between 1024 and 2048), under
   ``raster``, render only (``true_displacement_build_s``: its tessellation + BVH);
 * ``flip``: the sliced donut against that converged donut (both raster, 512^2);
 * ``render_time_screen_warm_s`` / ``flip_screen``: the same with screen-space slices;
 * ``depth_object_time_warm_s``: the cup depth object at 400^2, 150 slices (the paper's
-  high-quality case), raster, one sample per pixel;
+  high-quality case), raster, one sample per pixel; ``depth_object_time_noskip_warm_s``:
+  the same without empty-space skipping (every plane tested);
 * ``llvmpipe_s``: the paper's algorithm as OpenGL on Mesa llvmpipe (moderngl + EGL): the
   donut's 25 surface-aligned slices per base polygon, α-test by ``discard``, 512^2, one
   frame; ``llvmpipe_64_s`` / ``llvmpipe_150_s`` at 64 / 150 slices; ``null`` with
   ``llvmpipe_reason`` when it cannot run;
+* ``load_average``: the machine's 1-minute load average at the end (timings are wall
+  seconds on a shared machine);
 * ``slices_bytes`` (slice polygons + walls of ``best``: all three directions, §3.4 ratio
   scaling), ``slices_bytes_direction_a`` (25 surface-aligned slices), ``slices_bytes_screen``
   (walls only) vs ``displaced_bytes`` (the converged mesh).
@@ -23,6 +32,7 @@ All in one process (times are wall seconds; medians of 3 warm runs after a cold 
 from __future__ import annotations
 
 import json as _json
+import os
 import statistics
 import time
 from pathlib import Path
@@ -103,7 +113,12 @@ def main(json: bool = False) -> int:
     scene, build = _load(donut, mode="approximation", integrator="raster", res=RES)
     r["build_time_warm_s"] = build
     r["render_time_warm_s"], approx = _timed(lambda: _render(scene, raster))
-    stats = next(s for s in scene.shapes() if hasattr(s, "volume")).build_stats
+    shape = next(s for s in scene.shapes() if hasattr(s, "volume"))
+    shape.rasterise = False
+    r["render_time_walk_warm_s"], walked = _timed(lambda: _render(scene, raster))
+    shape.rasterise = True
+    r["flip_walk_vs_rasterised"] = flip(walked, approx)[0]
+    stats = shape.build_stats
     r["slices_used"] = stats["slices_used"]
     r["slices_bytes"] = stats["bytes"]
     from mi_displace.slicing import geometry as geo
@@ -113,6 +128,12 @@ def main(json: bool = False) -> int:
     r["slices_bytes_direction_a"] = geo.aligned_slices(volume.bm, volume.scale, 25).nbytes() + walls
     r["slices_bytes_screen"] = walls
     r.update(donut_gl(scene))
+    del scene
+    scene, _ = _load(donut, mode="approximation", integrator="raster", res=RES, direction="a")
+    r["render_time_a_warm_s"], _ = _timed(lambda: _render(scene, raster))
+    del scene
+    scene, _ = _load(donut, mode="approximation", integrator="raster", res=RES, slices="auto")
+    r["auto_slices"] = next(s for s in scene.shapes() if hasattr(s, "volume")).build_stats["slices"]
     del scene
     scene, _ = _load(donut, mode="approximation", integrator="raster", res=RES, direction="screen")
     r["render_time_screen_warm_s"], screen = _timed(lambda: _render(scene, raster))
@@ -140,10 +161,15 @@ def main(json: bool = False) -> int:
     scene, build = _load(cup, mode="approximation", integrator="raster", res=400, slices=150)
     r["depth_object_build_s"] = build
     r["depth_object_time_warm_s"], _ = _timed(lambda: _render(scene, raster))
+    obj = next(s for s in scene.shapes() if hasattr(s, "depth_object")).depth_object
+    obj.skip_empty = False
+    r["depth_object_time_noskip_warm_s"], _ = _timed(lambda: _render(scene, raster))
     del scene
     if r.get("llvmpipe_s"):
         r["speedup_vs_llvmpipe"] = r["llvmpipe_s"] / r["render_time_warm_s"]
     r["speedup_vs_true_displacement"] = r["true_displacement_time_warm_s"] / r["render_time_warm_s"]
+    r["speedup_vs_walk"] = r["render_time_walk_warm_s"] / r["render_time_warm_s"]
+    r["load_average"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     if json:
         print(_json.dumps(r, indent=2))
     else:

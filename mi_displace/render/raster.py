@@ -22,6 +22,11 @@ Mitsuba's acceleration structure (the default) or the z-buffer of :mod:`.zbuffer
 rays or the shadow maps of :mod:`.shadow_map`; with z-buffer and shadow maps no
 acceleration structure is needed (:func:`render`'s ``shapes``).
 
+A shape may draw itself GPU-style before the frame: :func:`render` calls
+``raster_begin(sensor, aa)`` on every shape that has it before visibility and
+``raster_end()`` after shading (the slicing shapes rasterise their slices there,
+:mod:`mi_displace.slicing.rasterised`).
+
 Nothing is random: two renders are bit-identical.
 """
 from __future__ import annotations
@@ -334,11 +339,19 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
         geom = zbuffer.gather_geometry(scene.shapes() if shapes is None else shapes)
     ray, weight, w, h = pixel_rays(sensor, aa)
     active = mi.Bool(True)
-    if options.visibility == "raytrace":
-        si, ray = first_opaque_hit(scene, ray, max_layers, active)
-    else:
-        si = zbuffer_hit(sensor, geom, ray, aa, max_layers)
-    L = shade_hit(scene, si, ray, active, shadow_test_of(scene, geom, options)) * weight
+    drawn = [s for s in (scene.shapes() if shapes is None else shapes) if hasattr(s, "raster_begin")]
+    try:
+        for shape in drawn:   # a handful of shapes
+            shape.raster_begin(sensor, aa)
+        if options.visibility == "raytrace":
+            si, ray = first_opaque_hit(scene, ray, max_layers, active)
+        else:
+            si = zbuffer_hit(sensor, geom, ray, aa, max_layers)
+        L = shade_hit(scene, si, ray, active, shadow_test_of(scene, geom, options)) * weight
+        dr.eval(L)
+    finally:
+        for shape in drawn:
+            shape.raster_end()
     n = aa * aa
     if n > 1:
         # evaluate the shading once: each channel's block_reduce would otherwise launch

@@ -16,7 +16,10 @@ The pipeline of a GPU, written as data-parallel array code (issue 18):
    (an exclusive prefix sum over the per-triangle counts; each candidate finds its triangle
    by a segmented prefix sum), so a micro-triangle costs one thread and a screen-covering
    triangle spreads over as many threads as it has samples.  The range is processed in
-   chunks of :data:`CHUNK` candidates (a Python loop over work batches, not triangles).
+   chunks of :data:`CHUNK` candidates (a Python loop over work batches, not triangles);
+   large triangles are enumerated by box rows instead (pieces of :data:`SPAN` samples),
+   one thread per piece looping over its part of the row's span (:func:`_row_span`), so
+   the samples of the box outside the triangle cost nothing.
 4. **Inside test** (homogeneous rasterisation, Olano & Greer 1997): edge functions
    ``e_ab = (h_a x h_b) . (qx, qy, 1)`` with ``h = (x, y, z)`` (perspective) or
    ``(x, y, 1)`` (orthographic).  The same expression gives the perspective-correct
@@ -51,6 +54,10 @@ CHUNK = 1 << 24
 #: Triangles with more candidate samples than ``small`` and at most this many loop over
 #: them in one thread; larger ones get one thread per candidate.
 MEDIUM = 64
+#: Samples of a box row one thread of a large triangle loops over (at most).
+SPAN = 64
+#: Grid cells by which a row's span is widened (:func:`_row_span`).
+SPAN_MARGIN = 0.5
 #: Key of a sample that no fragment reached.
 EMPTY = (1 << 64) - 1
 #: Grid units by which a bounding box is widened before rounding (the exact inside test
@@ -291,27 +298,75 @@ def _bbox(view: View, c: list):
     return start[0], start[1], count[0], count[1]
 
 
-def _edges(view: View, face: mi.Vector3u, c: list, X: mi.UInt32, Y: mi.UInt32,
-           active: mi.Bool):
-    """Inside test, barycentrics and depth at grid sample (X, Y) of triangles with vertex
-    indices ``face`` and clip-space vertices ``c``: ``(inside, b1, b2, z)``."""
+def screen_boxes(view: View, geom: Geometry, clip: mi.Point3f, tri: mi.UInt32):
+    """Candidate sample rectangles ``(x0, y0, width, height)`` (Int32) of triangles ``tri``
+    (``clip``: :func:`to_clip`), as :func:`rasterise` bins them (culling, binning)."""
+    return _bbox(view, _triangles(geom, clip, tri)[1])
+
+
+def _row_span(view: View, c: list, Y: mi.UInt32, x0: mi.Int32, x1: mi.Int32):
+    """Samples [xs, xe) of grid row ``Y`` that triangles with clip-space vertices ``c`` may
+    cover, within their box columns [x0, x1): the row's centre line cut with the projected
+    edges (each edge's point nearest to the line in y, so a superset of the exact span),
+    widened by :data:`SPAN_MARGIN` (the homogeneous edge test of a sliver triangle can
+    round a sample inside that lies a fraction of a cell outside its projection) and a
+    relative rounding margin; the whole box row where a vertex lies behind the near plane.
+    The inside test still decides."""
+    y = mi.Float(Y) + 0.5
+    g = [view.grid(p) for p in c]
+    lo, hi = mi.Float(dr.inf), mi.Float(-dr.inf)
+    for i in range(3):
+        (ax, ay), (bx, by) = g[i], g[(i + 1) % 3]
+        flat = ay == by
+        s = dr.clip((y - ay) / dr.select(flat, 1.0, by - ay), 0.0, 1.0)
+        for x in (ax + s * (bx - ax), dr.select(flat, bx, ax + s * (bx - ax))):
+            lo, hi = dr.minimum(lo, x), dr.maximum(hi, x)
+    margin = SPAN_MARGIN + 1e-5 * (dr.abs(lo) + dr.abs(hi))
+    xs = mi.Int32(dr.clip(dr.ceil(lo - 0.5 - margin), mi.Float(x0), mi.Float(x1)))
+    xe = mi.Int32(dr.clip(dr.floor(hi - 0.5 + margin) + 1, mi.Float(x0), mi.Float(x1)))
+    if view.perspective:
+        behind = (c[0].z < view.near) | (c[1].z < view.near) | (c[2].z < view.near)
+        xs, xe = dr.select(behind, x0, xs), dr.select(behind, x1, xe)
+    ok = dr.isfinite(lo) & dr.isfinite(hi)
+    return dr.select(ok, xs, x0), dr.select(ok, dr.maximum(xe, xs), x1)
+
+
+def _edge_setup(view: View, face: mi.Vector3u, c: list):
+    """Per triangle (vertex indices ``face``, clip-space vertices ``c``): the edge-function
+    vectors E_i (``e_i = E_i . (qx, qy, 1)``, the edge opposite vertex i in canonical vertex
+    order, sign folded in: negation is exact) and the vertex depths."""
     h = [view.homogeneous(v) for v in c]
-    q = mi.Vector3f(mi.Float(X) + 0.5, mi.Float(Y) + 0.5, 1.0)
-    e = []
-    for i in range(3):  # e_i: the edge opposite vertex i, in canonical vertex order
+    E = []
+    for i in range(3):
         j, k = (i + 1) % 3, (i + 2) % 3
         swap = face[j] > face[k]
         hj, hk = dr.select(swap, h[k], h[j]), dr.select(swap, h[j], h[k])
-        value = dr.dot(dr.cross(hj, hk), q)
-        e.append(dr.select(swap, -value, value))
+        value = dr.cross(hj, hk)
+        E.append(dr.select(swap, -value, value))
+    return E, (c[0].z, c[1].z, c[2].z)
+
+
+def _edges_at(view: View, setup, X: mi.UInt32, Y: mi.UInt32, active: mi.Bool):
+    """Inside test, barycentrics and depth at grid sample (X, Y) of triangles prepared by
+    :func:`_edge_setup`: ``(inside, b1, b2, z)``."""
+    E, (z0, z1, z2) = setup
+    q = mi.Vector3f(mi.Float(X) + 0.5, mi.Float(Y) + 0.5, 1.0)
+    e = [dr.dot(Ei, q) for Ei in E]
     total = e[0] + e[1] + e[2]
     inside = active & (total != 0) & (
         ((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0)))
     inv = dr.rcp(total)
     b1, b2 = e[1] * inv, e[2] * inv
-    z = (1.0 - b1 - b2) * c[0].z + b1 * c[1].z + b2 * c[2].z
+    z = (1.0 - b1 - b2) * z0 + b1 * z1 + b2 * z2
     inside &= (z >= view.near) & (z <= view.far)
     return inside, b1, b2, z
+
+
+def _edges(view: View, face: mi.Vector3u, c: list, X: mi.UInt32, Y: mi.UInt32,
+           active: mi.Bool):
+    """Inside test, barycentrics and depth at grid sample (X, Y) of triangles with vertex
+    indices ``face`` and clip-space vertices ``c``: ``(inside, b1, b2, z)``."""
+    return _edges_at(view, _edge_setup(view, face, c), X, Y, active)
 
 
 def _triangles(geom: Geometry, clip: mi.Point3f, tri: mi.UInt32, active: mi.Bool = True):
@@ -337,15 +392,58 @@ def to_clip(view: View, geom: Geometry) -> mi.Point3f:
     return clip
 
 
+def _behind(view: View, aa: int, keys: mi.UInt64, x0, y0, bw, bh, z_lo) -> mi.Bool:
+    """Hierarchical z (Greene et al. 1993): whether triangles with sample box (x0, y0, bw,
+    bh) and nearest depth ``z_lo`` lie behind every fragment already in ``keys`` there.
+    A pyramid of 2x2 maxima of the stored depths (+inf where empty; grid padded to a
+    power of two with -inf, where no sample lies); a box of side <= 2^L touches at most 2 x
+    2 texels of level L, so four lookups bound its stored depths."""
+    w, h = view.width, view.height
+    size = 1 << max(int(max(w, h)) - 1, 0).bit_length()
+    X, Y = sample_xy(view, dr.arange(mi.UInt32, w * h), aa)
+    depth = dr.select(keys == EMPTY, dr.inf, dr.reinterpret_array(mi.Float, mi.UInt32(keys >> 32)))
+    level = dr.full(mi.Float, -dr.inf, size * size)
+    dr.scatter(level, depth, Y * size + X)
+    levels, offsets, offset = [level], [0], size * size
+    while size > 1:   # log2(size) levels
+        size //= 2
+        i = dr.arange(mi.UInt32, size * size)
+        x, y = 2 * (i % size), 2 * (i // size)
+        prev = levels[-1]
+        at = lambda dx, dy: dr.gather(mi.Float, prev, (y + dy) * (2 * size) + x + dx)
+        level = dr.maximum(dr.maximum(at(0, 0), at(1, 0)), dr.maximum(at(0, 1), at(1, 1)))
+        dr.eval(level)
+        levels.append(level)
+        offsets.append(offset)
+        offset += size * size
+    pyramid = dr.zeros(mi.Float, offset)
+    for lvl, off in zip(levels, offsets):   # log2 levels, not elements
+        dr.scatter(pyramid, lvl, dr.arange(mi.UInt32, dr.width(lvl)) + off)
+    side = mi.UInt32(dr.maximum(dr.maximum(bw, bh), 1))
+    L = mi.UInt32(dr.ceil(dr.log2(mi.Float(side))))
+    L = dr.minimum(L, len(levels) - 1)
+    off = dr.gather(mi.UInt32, mi.UInt32(offsets), L)
+    n = dr.gather(mi.UInt32, mi.UInt32([1 << (len(levels) - 1 - k) for k in range(len(levels))]), L)
+    tx0, ty0 = mi.UInt32(dr.maximum(x0, 0)) >> L, mi.UInt32(dr.maximum(y0, 0)) >> L
+    tx1 = dr.minimum(mi.UInt32(dr.maximum(x0 + bw - 1, 0)) >> L, n - 1)
+    ty1 = dr.minimum(mi.UInt32(dr.maximum(y0 + bh - 1, 0)) >> L, n - 1)
+    some = (bw > 0) & (bh > 0)
+    far = mi.Float(-dr.inf)
+    for tx, ty in ((tx0, ty0), (tx1, ty0), (tx0, ty1), (tx1, ty1)):
+        far = dr.maximum(far, dr.gather(mi.Float, pyramid, off + ty * n + tx, some))
+    return some & (z_lo > far)
+
+
 def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
-              small: int = 1, floor: mi.UInt64 | None = None):
+              small: int = 1, floor: mi.UInt64 | None = None, alpha=None, initial=None):
     """Depth-test every triangle of ``geom`` at every grid sample of ``view``.
 
     Triangles with at most ``small`` candidate samples (micro-triangles, the common case
     after tessellation) are tested in the same kernel that bins them, one thread per
     triangle; those with up to :data:`MEDIUM` loop over their candidates in one thread;
-    larger ones are spread over one thread per candidate sample, so a screen-covering
-    triangle is as parallel as a million small ones.
+    larger ones are spread over one thread per piece of :data:`SPAN` samples of a box
+    row, each looping over the samples of its piece that the row's span may cover, so a
+    screen-covering triangle is as parallel as many small ones.
 
     Args:
         with_ids: keep the triangle (UInt64 keys: depth bits << 32 | triangle id) or only
@@ -355,6 +453,14 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
             kernel (each extra one costs every triangle an edge test).
         floor: optional per-sample keys (``with_ids``): only fragments whose key is
             larger enter the depth test (depth peeling; :data:`EMPTY` draws nothing).
+        alpha: optional per-fragment test (a GPU's ``discard``): ``alpha(tri, active)``
+            reads what it needs of triangles ``tri`` (once per thread, outside the loops
+            over samples) and returns ``test(index, b1, b2, active) -> Bool`` of their
+            fragments at samples ``index`` (:func:`sample_index`) with perspective-correct
+            barycentrics (b1, b2); fragments that fail it write no depth.
+        initial: optional keys to draw over (an existing z-buffer, left unchanged: the
+            result is a copy); default: empty.  With ``with_ids``, triangles behind every
+            stored fragment of their box are skipped whole (:func:`_behind`).
 
     Returns:
         (keys, clip): a (width * height,) UInt64 or UInt32 buffer in
@@ -363,55 +469,69 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
     """
     n_faces = dr.width(geom.faces)
     samples = view.width * view.height
-    keys = dr.full(mi.UInt64 if with_ids else mi.UInt32,
-                   EMPTY if with_ids else 0xFFFFFFFF, samples)
+    if initial is None:
+        keys = dr.full(mi.UInt64 if with_ids else mi.UInt32,
+                       EMPTY if with_ids else 0xFFFFFFFF, samples)
+    else:
+        keys = dr.copy(initial)
     if n_faces == 0 or samples == 0:
         return keys, None
     clip = to_clip(view, geom)
 
-    def depth_test(t, X, Y, inside, b1, b2, z):
+    def depth_test(t, X, Y, inside, b1, b2, z, test=None):
         depth = dr.reinterpret_array(mi.UInt32, dr.maximum(z, 0.0))
         index = sample_index(view, X, Y, aa)
         if with_ids:
             key = (mi.UInt64(depth) << 32) | mi.UInt64(t)
             if floor is not None:
                 inside &= key > dr.gather(mi.UInt64, floor, index, inside)
-            dr.scatter_reduce(dr.ReduceOp.Min, keys, key, index, inside)
-        else:
-            dr.scatter_reduce(dr.ReduceOp.Min, keys, depth, index, inside)
+        # early depth test (a read; the minimum only falls, so a stale value is safe): a
+        # fragment behind the stored one runs no alpha test and no atomic
+        value = key if with_ids else depth
+        inside &= value < dr.gather(type(value), keys, index, inside)
+        if test is not None:
+            inside &= test(index, b1, b2, inside)
+        dr.scatter_reduce(dr.ReduceOp.Min, keys, value, index, inside)
 
     tri = dr.arange(mi.UInt32, n_faces)
     face, c = _triangles(geom, clip, tri)
     x0, y0, bw, bh = _bbox(view, c)
     count = mi.UInt32(bw * bh)
+    if initial is not None and with_ids:   # hierarchical z: whole triangles behind the buffer
+        z_lo = dr.minimum(dr.minimum(c[0].z, c[1].z), c[2].z)
+        count = dr.select(_behind(view, aa, initial, x0, y0, bw, bh, z_lo), 0, count)
     # small triangles (<= `small` candidate samples): tested by the thread that bins them
     w = mi.UInt32(dr.maximum(bw, 1))  # >= 1: no division by zero, even in padding lanes
     for i in range(small):
         X, Y = mi.UInt32(x0) + i % w, mi.UInt32(y0) + i // w
-        depth_test(tri, X, Y, *_edges(view, face, c, X, Y, (count <= small) & (i < count)))
+        active = (count <= small) & (i < count)
+        depth_test(tri, X, Y, *_edges(view, face, c, X, Y, active),
+                   None if alpha is None else alpha(tri, active))
     dr.eval(keys, count)
     medium = dr.compress((count > small) & (count <= MEDIUM))
     if dr.width(medium):  # a symbolic loop over each triangle's candidates, one thread each
         face_m, c_m = _triangles(geom, clip, medium)
         x0_m, y0_m, bw_m, bh_m = _bbox(view, c_m)
         n_m, w_m = mi.UInt32(bw_m * bh_m), mi.UInt32(dr.maximum(bw_m, 1))
+        test_m = None if alpha is None else alpha(medium, mi.Bool(True))
+        setup_m = _edge_setup(view, face_m, c_m)
 
         def body(i):
             X, Y = mi.UInt32(x0_m) + i % w_m, mi.UInt32(y0_m) + i // w_m
-            depth_test(medium, X, Y, *_edges(view, face_m, c_m, X, Y, mi.Bool(True)))
+            depth_test(medium, X, Y, *_edges_at(view, setup_m, X, Y, mi.Bool(True)), test_m)
             return (i + 1,)
 
         dr.while_loop((mi.UInt32(0),), lambda i: i < n_m, body, label="raster_medium")
         dr.eval(keys)
-    busy = dr.compress(count > MEDIUM)  # the rest: one thread per candidate sample
+    busy = dr.compress(count > MEDIUM)  # the rest: one thread per piece of a row
     if dr.width(busy) == 0:
         return keys, clip
     _, c = _triangles(geom, clip, busy)
     bx0, by0, bw, bh = _bbox(view, c)
-    counts = mi.UInt32(bw * bh)
+    pieces = (mi.UInt32(bw) + (SPAN - 1)) // SPAN   # row pieces of at most SPAN samples
+    counts = mi.UInt32(bh) * pieces
     offsets = dr.prefix_sum(mi.UInt64(counts))  # exclusive
-    bwid = mi.UInt32(bw)
-    dr.eval(offsets, bx0, by0, bwid)
+    dr.eval(offsets, bx0, by0, bw, pieces)
     total = int(dr.sum(mi.UInt64(counts))[0])
     for start in range(0, total, CHUNK):  # work batches, not triangles
         size = min(CHUNK, total - start)
@@ -424,10 +544,20 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
         j = mi.UInt32(start + dr.arange(mi.UInt64, size) - dr.gather(mi.UInt64, offsets, k))
         # >= 1 also in the LLVM backend's padding lanes, where a gather yields 0 and an
         # integer division by it raises SIGFPE
-        w = dr.maximum(dr.gather(mi.UInt32, bwid, k), 1)
-        X = mi.UInt32(dr.gather(mi.Int32, bx0, k) + mi.Int32(j % w))
-        Y = mi.UInt32(dr.gather(mi.Int32, by0, k) + mi.Int32(j // w))
-        depth_test(t, X, Y, *fragment(view, clip, geom, t, X, Y, mi.Bool(True)))
+        n = dr.maximum(dr.gather(mi.UInt32, pieces, k), 1)
+        Y = mi.UInt32(dr.gather(mi.Int32, by0, k) + mi.Int32(j // n))
+        x0 = dr.gather(mi.Int32, bx0, k) + mi.Int32(j % n) * SPAN
+        x1 = dr.minimum(x0 + SPAN, dr.gather(mi.Int32, bx0, k) + dr.gather(mi.Int32, bw, k))
+        face, c = _triangles(geom, clip, t)
+        xs, xe = _row_span(view, c, Y, x0, x1)
+        test = None if alpha is None else alpha(t, mi.Bool(True))
+        setup = _edge_setup(view, face, c)
+
+        def body(X):
+            depth_test(t, X, Y, *_edges_at(view, setup, X, Y, mi.Bool(True)), test)
+            return (X + 1,)
+
+        dr.while_loop((mi.UInt32(xs),), lambda X: X < mi.UInt32(xe), body, label="raster_rows")
         dr.eval(keys)
     return keys, clip
 

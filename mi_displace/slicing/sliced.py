@@ -45,6 +45,12 @@ class Hit:
     su: mi.Vector3f
     sv: mi.Vector3f
 
+    def select(self, mask: mi.Bool, other: "Hit") -> "Hit":
+        """Per lane ``self`` where ``mask``, else ``other``."""
+        return Hit(*(dr.select(mask, a, b) for a, b in
+                     zip((self.found, self.p, self.uv, self.n, self.su, self.sv),
+                         (other.found, other.p, other.uv, other.n, other.su, other.sv))))
+
 
 class SlicedVolume:
     """The slices of one displaced surface.
@@ -93,6 +99,8 @@ class SlicedVolume:
             self.families[fam] = (geo.SliceScene(geo.concat([sm, walls]), f"slices_{fam}"),
                                   4 * self.counts[fam] + 64)
         self.walls_scene = geo.SliceScene(walls, "walls")   # also the proxy's face frames
+        #: the slices rasterised for the current raster frame (mi_displace.slicing.rasterised)
+        self.frame = None
         if direction == "screen":
             self.delta = self.world_scale / slices
             self.inv_world = mi.Transform4f(mi.ScalarTransform4f(mi.ScalarMatrix4f(
@@ -160,6 +168,16 @@ class SlicedVolume:
                                      ((bn, hit.n), (su, hit.su), (sv, hit.sv)))
         hit.n = dr.normalize(hit.n)
         return hit
+
+    def find_view(self, origin: mi.Point3f, d: mi.Vector3f, choice: mi.UInt32,
+                  active: mi.Bool) -> Hit:
+        """:meth:`find` for rays that may be the current frame's sample rays: those take
+        their fragment from the rasterised slices (:attr:`frame`, set by the raster
+        integrator), the others walk."""
+        if self.frame is None:
+            return self.find(origin, d, choice, active)
+        use, drawn = self.frame.lookup(origin, d, active)
+        return drawn.select(use, self.find(origin, d, choice, mi.Bool(active) & ~use))
 
     def _find_screen(self, origin, d, active):
         """§3.3: planes p . d = k delta clipped to the volume (the base's exact coordinates)."""

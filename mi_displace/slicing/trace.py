@@ -113,9 +113,13 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
 
 def first_passing_plane(o: mi.Point3f, d: mi.Vector3f, m: mi.Vector3f, c, delta: float,
                         t_in: mi.Float, t_out: mi.Float, test: Callable[[mi.Point3f], mi.Bool],
-                        active: mi.Bool, max_iter: int):
+                        active: mi.Bool, max_iter: int, skip=None):
     """First of the planes ``p . m = c + k delta`` (k integer) met by ``o + t d`` in
     [t_in, t_out] where ``test(p)`` holds, front to back.
+
+    ``skip(t) -> Float`` (optional, empty-space skipping): a ray parameter up to which
+    ``test`` fails for every point of the ray (``t`` where nothing is known); the planes
+    before it are passed over without testing them.  The result is the same.
 
     Returns:
         ``(found, t)``: t of the passing plane point (unspecified where not found).
@@ -134,7 +138,12 @@ def first_passing_plane(o: mi.Point3f, d: mi.Vector3f, m: mi.Vector3f, c, delta:
         passes = going & test(o + t * d)
         t_hit = dr.select(passes, t, t_hit)
         found |= passes
-        return j + 1, found, t_hit, going & ~passes & (j + 1 < max_iter)
+        nxt = j + 1
+        if skip is not None:   # the first plane at or after skip(t)
+            f = (om + skip(t) * dm - c) / delta
+            k = dr.select(dm > 0, dr.ceil(f), dr.floor(f))
+            nxt = mi.UInt32(dr.clip(step * (k - k0), mi.Float(nxt), float(max_iter)))
+        return nxt, found, t_hit, going & ~passes & (nxt < max_iter)
 
     _, found, t_hit, _ = dr.while_loop(
         state=(mi.UInt32(0), dr.zeros(mi.Bool, n), dr.zeros(mi.Float, n), ok),

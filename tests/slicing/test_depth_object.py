@@ -189,3 +189,23 @@ def test_plugin_bad_input(variant, tmp_path):
         mi.load_dict({"type": "depth_object", "filename": str(tmp_path / "none.json")})
     with pytest.raises(Exception, match="slices"):
         mi.load_dict({"type": "depth_object", "source": SPHERE, "slices": 0})
+
+
+@pytest.mark.parametrize("hull", [False, True])
+def test_empty_space_skipping_changes_nothing(sphere_images, hull):
+    """The occupancy grid is conservative (every point the §4.1 test finds inside lies in
+    an occupied cell) and skipping finds the same points as testing every plane."""
+    obj = dobj.DepthObject(sphere_images, 150, hull=hull)
+    rng = np.random.default_rng(5)
+    q = rng.uniform(-1, 1, (20000, 3))
+    inside = np.array(obj.inside(mi.Point3f(*[mi.Float(q[:, k].astype(np.float32)) for k in range(3)])))
+    cell = np.clip(np.floor((q + 1) / 2 * dobj.GRID).astype(int), 0, dobj.GRID - 1)
+    occ = np.array(obj.occupancy).reshape((dobj.GRID,) * 3)
+    assert inside.sum() > 1000 and occ[tuple(cell[inside].T)].all()
+    assert occ.mean() < 0.5                      # and it does skip: most cells are empty
+    o, d, _ = ray_batch(600, seed=9)
+    found, p = run_find(obj, o, d)
+    obj.skip_empty = False                       # test every plane
+    found_all, p_all = run_find(obj, o, d)
+    assert found.sum() > 100 and np.array_equal(found, found_all)
+    assert np.array_equal(p[found], p_all[found])

@@ -202,7 +202,8 @@ def test_auto_slices_follow_the_sensor(variant):
     # nearest point of the box at distance 4.9: 0.1 world units span 400 * 0.1 / (2 * 4.9 tan 15)
     expect = 400 * 0.1 / (2 * 4.9 * math.tan(math.radians(15)))
     assert geo.projected_size(sensor, bbox, 0.1) == pytest.approx(expect, rel=2e-3)
-    assert geo.auto_slices(sensor, bbox, 0.1) == math.ceil(expect)
+    assert geo.auto_slices(sensor, bbox, 0.1) == math.ceil(geo.SLICES_PER_PIXEL * expect)
+    assert expect / geo.auto_slices(sensor, bbox, 0.1) <= 0.5   # slices <= half a pixel apart
     scene = mi.load_dict({"type": "scene", "cam": sensor,
                           "obj": {"type": "slicing", "base": "plane", "scale": 0.1, "slices": "auto",
                                   "sensor": sensor, "height": {"type": "uniform", "value": 0.5}}})

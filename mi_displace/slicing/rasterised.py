@@ -1,0 +1,227 @@
+"""The slice polygons drawn as a GPU draws them (§3): rasterised by our z-buffer.
+
+Under the ``raster`` integrator the slices of a :class:`~mi_displace.slicing.sliced.SlicedVolume`
+are not walked by ray queries but rasterised once per frame by
+:func:`mi_displace.render.zbuffer.rasterise` at the sensor's samples: the α-test is a
+per-fragment ``discard`` (a fragment whose test fails writes no depth), the depth test
+keeps the front-most passing fragment, and the BSDF then shades that fragment
+(:meth:`FrameBuffer.lookup`).  The slices are the same polygons, at the same places, as
+those the ray-traced walk meets (:mod:`mi_displace.slicing.trace`), so both draw the same
+image:
+
+* the slicing family of a sample (``best``: §3.2, the direction most perpendicular to the
+  viewer) is chosen, as by the walk, from the frame of the first wall of the displacement
+  volume the sample's ray meets (the walls rasterised first); a fragment of another family
+  is discarded;
+* the walls themselves are never drawn, except the bottom wall where the ray leaves
+  through it when the base polygons are drawn too (``opaque_base``).
+
+The walk stops at the wall the ray leaves through and Mitsuba continues the ray; the
+rasteriser sees every stretch of the volume at once, with the family chosen at the first
+one.  Where they differ: rays that pass through a first stretch and meet a second one
+whose entry face would pick another family, and slices seen edge-on (a view along the
+slices of a forced direction b or c), where the walk's step past each polygon and the
+rasteriser's sliver triangles decide a few pixels differently (measured in
+docs/slicing.md).  Screen-space slicing (closed-form planes) is not rasterised.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from mi_displace.render import zbuffer
+from mi_displace.render.raster import pixel_rays
+from mi_displace.slicing.sliced import FAMILIES, Hit, SlicedVolume
+from mi_displace.slicing.trace import alpha_test
+
+#: A lane's ray is one of the frame's sample rays when it passes this close to the sample's
+#: ray (relative to 1 + the distance) and points along it within this many grid cells.
+ON_RAY_EPS, ON_SAMPLE_CELLS = 1e-4, 1e-2
+
+
+@dataclass
+class FrameBuffer:
+    """The front-most passing slice fragment of every sample of one view.
+
+    Attributes:
+        view: the sensor's :class:`~mi_displace.render.zbuffer.View`; aa: sub-samples per
+            pixel side (the sample order of :func:`mi_displace.render.raster.pixel_rays`).
+        covered: per sample, whether its ray meets the volume's walls (Bool).
+        hit: per sample, the fragment (:class:`~mi_displace.slicing.sliced.Hit`; ``found``
+            False where every fragment was discarded).
+        eye: (3,) camera position (perspective) or None (orthographic).
+    """
+
+    view: zbuffer.View
+    aa: int
+    covered: mi.Bool
+    hit: Hit
+    eye: np.ndarray | None
+
+    def lookup(self, origin: mi.Point3f, d: mi.Vector3f, active: mi.Bool):
+        """The fragment of the frame's sample whose ray ``origin + t d`` (t >= 0) is.
+
+        Returns:
+            ``(use, hit)``: ``use`` where the lane's ray is a sample ray of this frame that
+            meets the volume (and its fragment is not behind ``origin``); elsewhere the
+            caller walks the slices itself.
+        """
+        view = self.view
+        local = mi.Transform4f(view.to_local.astype(np.float32))
+        dl = local @ d
+        if view.perspective:
+            eye = mi.Point3f(*[float(x) for x in self.eye])
+            r = origin - eye
+            off = r - dr.dot(r, d) * d
+            on_ray = dr.norm(off) <= ON_RAY_EPS * (1 + dr.norm(r))
+            on_ray &= (dr.dot(r, d) >= -ON_RAY_EPS * (1 + dr.norm(r))) & (dl.z > 0)
+            q = mi.Point2f(dl.x / dl.z, dl.y / dl.z)
+        else:
+            ol = local @ origin
+            on_ray = (dr.abs(dl.x) + dr.abs(dl.y) <= ON_RAY_EPS) & (dl.z > 0)
+            q = mi.Point2f(ol.x, ol.y)
+        gx, gy = (q.x - view.q0[0]) / view.dq[0], (q.y - view.q0[1]) / view.dq[1]
+        X, Y = dr.floor(gx), dr.floor(gy)
+        on_ray &= (dr.abs(gx - X - 0.5) <= ON_SAMPLE_CELLS) & (dr.abs(gy - Y - 0.5) <= ON_SAMPLE_CELLS)
+        on_ray &= (X >= 0) & (X < view.width) & (Y >= 0) & (Y < view.height)
+        use = mi.Bool(active) & on_ray
+        index = zbuffer.sample_index(view, mi.UInt32(dr.maximum(X, 0)), mi.UInt32(dr.maximum(Y, 0)),
+                                     self.aa)
+        use &= dr.gather(mi.Bool, self.covered, index, use)
+        h = self.hit
+        hit = Hit(*(dr.gather(type(x), x, index, use) for x in (h.found, h.p, h.uv, h.n, h.su, h.sv)))
+        use &= ~hit.found | (dr.dot(hit.p - origin, d) >= -ON_RAY_EPS * (1 + dr.norm(hit.p - origin)))
+        return use, hit
+
+
+def _box_counts(view: zbuffer.View, aa: int, mask: mi.Bool, boxes) -> mi.UInt32:
+    """Per rectangle ``(x0, y0, width, height)`` of the sample grid, how many samples in it
+    have ``mask`` set (a summed-area table: two prefix sums, four lookups per box)."""
+    w, h = view.width, view.height
+    X, Y = zbuffer.sample_xy(view, dr.arange(mi.UInt32, w * h), aa)
+    grid = dr.zeros(mi.UInt32, (w + 1) * (h + 1))   # zero first row and column
+    dr.scatter(grid, mi.UInt32(mask), (Y + 1) * (w + 1) + X + 1)
+    for stride, length in ((w + 1, h + 1), (h + 1, w + 1)):   # rows, then columns
+        inclusive = dr.cumsum(grid)
+        start = dr.arange(mi.UInt32, dr.width(grid)) // stride * stride
+        grid = inclusive - dr.gather(mi.UInt32, inclusive - grid, start)
+        # transpose (stride x length -> length x stride) for the next pass / the result
+        i = dr.arange(mi.UInt32, dr.width(grid))
+        grid = dr.gather(mi.UInt32, grid, (i % length) * stride + i // length)
+        dr.eval(grid)
+    x0, y0, bw, bh = boxes
+    x0, y0 = mi.UInt32(x0), mi.UInt32(y0)
+    x1, y1 = x0 + mi.UInt32(bw), y0 + mi.UInt32(bh)
+    some = (bw > 0) & (bh > 0)
+    at = lambda x, y: dr.gather(mi.UInt32, grid, y * (w + 1) + x, some)
+    return dr.select(some, at(x1, y1) - at(x0, y1) - at(x1, y0) + at(x0, y0), 0)
+
+
+def _resolve(view, aa, clip, geom, tri, found, ray):
+    """Barycentrics and point on the sample's ray of fragments of triangles ``tri``."""
+    X, Y = zbuffer.sample_xy(view, dr.arange(mi.UInt32, dr.width(tri)), aa)
+    _, b1, b2, _ = zbuffer.fragment(view, clip, geom, tri, X, Y, found)
+    face = dr.gather(mi.Vector3u, geom.faces, tri, found)
+    p = [dr.gather(mi.Point3f, geom.positions, face[i], found) for i in range(3)]
+    t = dr.dot((1.0 - b1 - b2) * p[0] + b1 * p[1] + b2 * p[2] - ray.o, ray.d)
+    return (b1, b2), ray.o + t * ray.d
+
+
+def _store(hit: Hit, found, slices, prim, bary, p) -> Hit:
+    """``hit`` with the fragments of ``slices`` faces ``prim`` where ``found``."""
+    uv = mi.Point2f(*slices.lerp(slices.uv, 2, slices.corners(prim, found), bary, found))
+    n, su, sv = slices.frame(prim, bary, found)
+    return Hit(found, p, uv, n, su, sv).select(found, hit)
+
+
+def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
+    """Rasterise the slices of ``volume`` at the samples of ``sensor`` (module doc).
+
+    Raises:
+        ValueError: for screen-space slicing (planes, not polygons) and sensors the
+            z-buffer does not support (:func:`mi_displace.render.zbuffer.view_from_sensor`).
+    """
+    if volume.direction == "screen":
+        raise ValueError("slicing: screen-space slices are planes met in closed form, not "
+                         "polygons: they are not rasterised")
+    view = zbuffer.view_from_sensor(sensor, aa)
+    ray, _, _, _ = pixel_rays(sensor, aa)
+    n = dr.width(ray.d)
+    low = mi.UInt64(0xFFFFFFFF)
+    # the first wall each sample's ray meets: the proxy face the walk starts from
+    walls = volume.walls_scene
+    wgeom = walls.geometry()
+    wkeys, _ = zbuffer.rasterise(view, wgeom, True, aa=aa)
+    covered = wkeys != zbuffer.EMPTY
+    third = dr.full(mi.Float, 1 / 3, n)
+    bn, su, sv = walls.frame(mi.UInt32(wkeys & low), (third, third), covered)
+    choice = volume.choose(ray.d, dr.normalize(bn), su, sv)
+    dr.eval(covered, choice)
+    hit = Hit(dr.zeros(mi.Bool, n), mi.Point3f(ray.o), dr.zeros(mi.Point2f, n),
+              dr.zeros(mi.Vector3f, n), dr.zeros(mi.Vector3f, n), dr.zeros(mi.Vector3f, n))
+    # the base polygons, when drawn: the bottom wall where the ray leaves through it; drawn
+    # first, it hides every slice fragment behind it (early depth test) and stays below
+    # every slice fragment in front of it (its key keeps the depth, an id of all ones)
+    initial = dr.full(mi.UInt64, zbuffer.EMPTY, n)
+    if volume.opaque_base:
+        every = dr.arange(mi.UInt32, dr.width(wgeom.faces))
+        bottoms = dr.compress((dr.gather(mi.UInt32, walls.flags, every) & 2) != 0)
+        bgeom = dataclasses.replace(wgeom, faces=dr.gather(mi.Vector3u, wgeom.faces, bottoms))
+
+        def leaving(tri, active):   # seen from inside: the ray runs along the outward normal
+            fn = walls.face_normal(dr.gather(mi.UInt32, bottoms, tri, active), active)
+            return lambda sample, b1, b2, active: active & dr.gather(mi.Bool, covered, sample, active) & (
+                dr.dot(dr.gather(mi.Vector3f, ray.d, sample, active), fn) > 0)
+
+        base, bclip = zbuffer.rasterise(view, bgeom, True, aa=aa, alpha=leaving)
+        found = base != zbuffer.EMPTY
+        tri = mi.UInt32(base & low)
+        bary, p = _resolve(view, aa, bclip, bgeom, tri, found, ray)
+        hit = _store(hit, found, walls, dr.gather(mi.UInt32, bottoms, tri, found), bary, p)
+        initial = base | low
+        dr.eval(initial, hit.found, hit.p, hit.uv, hit.n, hit.su, hit.sv)
+    for index, fam in enumerate(FAMILIES[volume.direction]):   # a, b, c: three at most
+        mine = covered & (choice == index)
+        if not dr.any(mine):
+            continue
+        slices = volume.families[fam][0]
+        # drawn: the slice triangles (not the walls) whose screen box holds a sample of
+        # this family
+        full = slices.geometry()
+        every = dr.arange(mi.UInt32, dr.width(full.faces))
+        boxes = zbuffer.screen_boxes(view, full, zbuffer.to_clip(view, full), every)
+        keep = dr.compress((_box_counts(view, aa, mine, boxes) > 0)
+                           & ((dr.gather(mi.UInt32, slices.flags, every) & 1) == 0))
+        geom = dataclasses.replace(full, faces=dr.gather(mi.Vector3u, full.faces, keep))
+
+        def alpha(tri, active):   # §3.1 / §3.2: the fragment's α-test, a discard
+            idx = slices.corners(dr.gather(mi.UInt32, keep, tri, active), active)
+            uvs = [mi.Point2f(*(dr.gather(mi.Float, slices.uv, 2 * v + k, active) for k in range(2)))
+                   for v in idx]
+            ramps = [dr.gather(mi.Float, slices.ramp, v, active) for v in idx]
+
+            def test(sample, b1, b2, active):
+                active = active & dr.gather(mi.Bool, mine, sample, active)
+                b0 = 1.0 - b1 - b2
+                uv = b0 * uvs[0] + b1 * uvs[1] + b2 * uvs[2]
+                ramp = b0 * ramps[0] + b1 * ramps[1] + b2 * ramps[2]
+                return active & alpha_test(volume.alpha, volume.D(uv), ramp)
+
+            return test
+
+        keys, clip = zbuffer.rasterise(view, geom, True, aa=aa, alpha=alpha, initial=initial)
+        found = mine & ((keys & low) != low)
+        tri = mi.UInt32(keys & low)
+        bary, p = _resolve(view, aa, clip, geom, tri, found, ray)
+        hit = _store(hit, found, slices, dr.gather(mi.UInt32, keep, tri, found), bary, p)
+        dr.eval(hit.found, hit.p, hit.uv, hit.n, hit.su, hit.sv)
+    hit.n = dr.normalize(hit.n)
+    dr.eval(hit.n)
+    eye = None
+    if view.perspective:
+        eye = np.array(sensor.world_transform() @ mi.ScalarPoint3f(0, 0, 0), np.float64).ravel()
+    return FrameBuffer(view, aa, covered, hit, eye)

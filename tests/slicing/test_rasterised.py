@@ -1,0 +1,181 @@
+"""The slices rasterised by our z-buffer (mi_displace.slicing.rasterised) against the
+second implementation of the same slices: the ray-traced walk (rasterise=false)."""
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mi_displace.evaluate.metrics import flip
+from mi_displace.render import zbuffer
+from mi_displace.slicing import rasterised
+
+
+
+def donut(direction):
+    return {"type": "slicing", "base": "torus", "major_radius": 1.0, "minor_radius": 0.4,
+            "resolution": 16, "scale": 0.08, "slices": 8, "direction": direction,
+            "draw_base": True,
+            "height": {"type": "bricks", "rows": 4, "columns": 2, "mortar": 0.12, "bevel": 0.2,
+                       "to_uv": mi.ScalarTransform4f().scale([4, 2, 1])}}
+
+
+def both(helpers, shape, sensor):
+    """(rasterised image, walked image, the slicing shape)."""
+    img, scene = helpers.render({**shape, "bsdf": helpers.MATERIAL}, sensor)
+    obj = next(s for s in scene.shapes() if hasattr(s, "volume"))
+    assert obj.volume.frame is None   # the frame is dropped after the render
+    obj.rasterise = False
+    walked = np.array(mi.render(scene))[..., :3]
+    return img, walked, obj
+
+
+def assert_same(img, walked):
+    diff = np.abs(img - walked).max(-1)
+    assert np.isfinite(img).all() and np.isfinite(walked).all()
+    assert (diff > 1e-3).mean() < 0.005, (diff > 1e-3).mean()
+    assert flip(walked, img)[0] < 0.005
+
+
+@pytest.mark.parametrize("direction", ["a", "best"])
+def test_rasterised_donut_is_the_walked_donut(variant, helpers, direction):
+    sensor = helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=64)
+    img, walked, obj = both(helpers, donut(direction), sensor)
+    assert (np.abs(img - 0.1).max(-1) > 1e-3).mean() > 0.2   # the donut is there
+    assert_same(img, walked)
+    # the fragments themselves against the walk from the first wall the ray meets
+    vol = obj.volume
+    frame = rasterised.draw(vol, mi.load_dict(sensor))
+    ray, *_ = rasterised.pixel_rays(mi.load_dict(sensor), 1)
+    use, drawn = frame.lookup(ray.o, ray.d, mi.Bool(True))
+    pi = vol.walls_scene.scene.ray_intersect_preliminary(ray)
+    third = dr.full(mi.Float, 1 / 3, dr.width(ray.d))
+    bn, su, sv = vol.walls_scene.frame(pi.prim_index, (third, third), pi.is_valid())
+    walk = vol.find(ray.o, ray.d, vol.choose(ray.d, dr.normalize(bn), su, sv), pi.is_valid())
+    use, found, ref = np.array(use), np.array(drawn.found), np.array(walk.found)
+    assert use.mean() > 0.2 and np.array_equal(use, np.array(frame.covered))
+    assert (found[use] == ref[use]).mean() > 0.99
+    both_found = use & found & ref
+    gap = np.linalg.norm(np.array(drawn.p) - np.array(walk.p), axis=0)[both_found]
+    assert (gap < 1e-4).mean() > 0.99
+
+
+def test_rasterised_plane_orthographic_and_aa(variant, helpers):
+    """An orthographic view (other lookup) and 2 x 2 samples per pixel (other sample order)."""
+    sensor = helpers.look([0.3, -2.0, 2.0], [0, 0, 0], res=40, ortho_size=0.9)
+    img, walked, _ = both(helpers, helpers.plane(slices=12, direction="best"), sensor)
+    assert_same(img, walked)
+    scene = mi.load_dict({"type": "scene", "obj": {**helpers.plane(slices=12, direction="c")},
+                          "sun": {"type": "directional", "direction": [-0.4, 0.5, -0.75]},
+                          "sensor": helpers.look([0, -2.6, 2.6], [0, 0, 0], res=24)})
+    raster = mi.load_dict({"type": "raster", "aa": 2})
+    a = np.array(mi.render(scene, integrator=raster))
+    next(s for s in scene.shapes() if hasattr(s, "volume")).rasterise = False
+    assert_same(a, np.array(mi.render(scene, integrator=raster)))
+
+
+def test_zero_heights_draw_nothing(variant, helpers):
+    """ramp α-test: a zero map discards every fragment (the base not drawn: nothing)."""
+    zero = {"type": "uniform", "value": 0.0}
+    sensor = helpers.look([0, -2.6, 2.6], [0, 0, 0], res=32)
+    img, walked, obj = both(helpers, helpers.plane(height=zero, direction="best", draw_base=False),
+                            sensor)
+    frame = rasterised.draw(obj.volume, mi.load_dict(sensor))
+    assert np.array(frame.covered).mean() > 0.2 and not np.array(frame.hit.found).any()
+    assert np.abs(img - 0.1).max() < 1e-5 and np.abs(walked - 0.1).max() < 1e-5
+
+
+def test_path_renders_are_unchanged_after_raster(variant, helpers):
+    sensor = helpers.look([0, -2.6, 2.6], [0, 0, 0], res=24)
+    shape = {**helpers.plane(slices=8, direction="best"), "bsdf": helpers.MATERIAL}
+    scene = mi.load_dict({"type": "scene", "obj": shape, "sensor": sensor,
+                          "sun": {"type": "directional", "direction": [-0.4, 0.5, -0.75]}})
+    path = mi.load_dict({"type": "path", "max_depth": 2})
+    before = np.array(mi.render(scene, integrator=path, spp=4, seed=3))
+    mi.render(scene, integrator=mi.load_dict({"type": "raster"}))
+    after = np.array(mi.render(scene, integrator=path, spp=4, seed=3))
+    assert np.array_equal(before, after)
+
+
+def test_alpha_and_initial_keys_of_the_zbuffer(variant):
+    """zbuffer.rasterise's discard and drawing over an existing buffer (with hierarchical z)
+    against the same triangles drawn plainly."""
+    sensor = mi.load_dict({"type": "perspective", "fov": 50, "to_world": mi.ScalarTransform4f().look_at(
+        origin=[0, 0, 3], target=[0, 0, 0], up=[0, 1, 0]),
+        "film": {"type": "hdrfilm", "width": 96, "height": 80}})
+    # two big overlapping quads (near z = 0.5 and far z = 0) and a small one behind both
+    quads = [(0.5, 1.0), (0.0, 1.2), (-0.5, 0.2)]
+    pos, faces = [], []
+    for z, r in quads:
+        base = len(pos)
+        pos += [[-r, -r, z], [r, -r, z], [r, r, z], [-r, r, z]]
+        faces += [[base, base + 1, base + 2], [base, base + 2, base + 3]]
+    mesh = mi.Mesh("quads", len(pos), len(faces))
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(np.array(pos, np.float32).ravel())
+    params["faces"] = mi.UInt32(np.array(faces, np.uint32).ravel())
+    params.update()
+    geom = zbuffer.gather_geometry([mesh])
+    view = zbuffer.view_from_sensor(sensor)
+    plain, _ = zbuffer.rasterise(view, geom)
+    tri = np.array(plain) & 0xFFFFFFFF
+    assert set(np.unique(tri[np.array(plain) != zbuffer.EMPTY])) <= {0, 1, 2, 3}
+    # discard the near quad's fragments left of x = 0: the far quad shows through there
+    X, _ = zbuffer.sample_xy(view, dr.arange(mi.UInt32, view.width * view.height), 1)
+    left = X < view.width // 2
+    keys, _ = zbuffer.rasterise(view, geom, alpha=lambda t, active: lambda s, b1, b2, a: ~(
+        (t < 2) & dr.gather(mi.Bool, left, s, a)))
+    got = np.array(keys) & 0xFFFFFFFF
+    near = np.isin(tri, [0, 1])
+    assert np.all(np.isin(got[near & np.array(left)], [2, 3]))
+    assert np.array_equal(got[near & ~np.array(left)], tri[near & ~np.array(left)])
+    # drawing the small far quad over the plain buffer changes nothing (all behind)
+    small = dataclass_faces(geom, [4, 5])
+    over, _ = zbuffer.rasterise(view, small, initial=plain)
+    assert np.array_equal(np.array(over), np.array(plain))
+    # over an empty buffer the small quad is drawn
+    alone, _ = zbuffer.rasterise(view, small, initial=dr.full(mi.UInt64, zbuffer.EMPTY, dr.width(plain)))
+    assert (np.array(alone) != zbuffer.EMPTY).sum() > 20
+
+
+def dataclass_faces(geom, faces):
+    import dataclasses
+    return dataclasses.replace(geom, faces=dr.gather(mi.Vector3u, geom.faces, mi.UInt32(faces)))
+
+
+@pytest.mark.parametrize("integrator, follows", [("path", False), ("volpath", True)])
+def test_shadows_onto_other_objects(variant, integrator, follows):
+    """path's shadow rays stop at the volume's boundary (a solid shadow); volpath's
+    next-event estimation passes through null-BSDF surfaces, asking the slicing BSDF's null
+    transmission, so the floor gets the slices' own shadow (bricks, lit through the cut-out
+    mortar).  Truth: the slice walk from each floor point towards the light."""
+    T = mi.ScalarTransform4f
+    wl = np.array([-0.6, 0.0, 1.0]) / np.linalg.norm([-0.6, 0.0, 1.0])   # towards the sun
+    scene = mi.load_dict({
+        "type": "scene", "integrator": {"type": integrator, "max_depth": 3},
+        "obj": {"type": "slicing", "base": "plane", "slices": 16, "direction": "a",
+                "alpha": "ramp", "scale": 0.3, "bsdf": {"type": "diffuse"},
+                "height": {"type": "bricks", "rows": 3, "columns": 2, "mortar": 0.3, "bevel": 0.1},
+                "to_world": T().translate([0, 0, 1.0]) @ T().scale(0.6)},
+        "floor": {"type": "rectangle", "to_world": T().scale(3), "bsdf": {"type": "diffuse"}},
+        "sun": {"type": "directional", "direction": (-wl).tolist(), "irradiance": 3.0},
+        # looking down at the floor east of the object, where its shadow falls
+        "sensor": {"type": "orthographic", "to_world": T().look_at(
+            origin=[0.95, 0, 3], target=[0.95, 0, 0], up=[0, 1, 0]) @ T().scale([0.25, 0.25, 1]),
+            "film": {"type": "hdrfilm", "width": 40, "height": 40}}})
+    img = np.array(mi.render(scene, spp=4))[..., :3].mean(-1)
+    assert np.isfinite(img).all()
+    lit = 0.5 / np.pi * 3.0 * wl[2]                     # the floor's radiance in the sun
+    dark = (img < 0.5 * lit).ravel()
+    # the truth: walk the slices from each pixel's floor point towards the light
+    sensor = scene.sensors()[0]
+    ray, *_ = rasterised.pixel_rays(sensor, 1)
+    o = np.array(ray.o) + np.array(ray.d) * (-np.array(ray.o)[2] / np.array(ray.d)[2])
+    vol = next(s for s in scene.shapes() if hasattr(s, "volume")).volume
+    n = o.shape[1]
+    hit = vol.find(mi.Point3f(*[mi.Float(x.astype(np.float32)) for x in o]),
+                   mi.Vector3f(*[mi.Float(np.full(n, x, np.float32)) for x in wl]),
+                   dr.zeros(mi.UInt32, n), mi.Bool(True))
+    shadow = np.array(hit.found)
+    assert 0.2 < shadow.mean() < 0.8                  # bricks and lit mortar both there
+    agree = (dark == shadow).mean()
+    assert (agree > 0.9) == follows, agree
