@@ -22,6 +22,9 @@ def _sweep_options(p) -> None:
 
     p.add_argument("--max-spp", type=_positive_int, default=DEFAULT_MAX_SPP,
                    help=f"most reference samples per pixel (default {DEFAULT_MAX_SPP})")
+    p.add_argument("--noise-floor", type=float, default=None, metavar="FLIP",
+                   help="reference noise-floor target: its spp doubles until the two-seed floor "
+                        "is below FLIP (or a fifth of the smallest error), capped at --max-spp")
     p.add_argument("--cluster", default=None, metavar="ADDRESS",
                    help="run the points on a Dask cluster: tcp://HOST:PORT, or local:N")
     p.add_argument("--cache", type=Path, default=None, metavar="DIR",
@@ -45,7 +48,8 @@ def _cmd_tradeoff(args) -> int:
     from mi_displace.evaluate.tradeoff import tradeoff
 
     r = tradeoff(args.scene, _parsed_knobs(args), out_dir=args.out, params=dict(args.defines),
-                 max_spp=args.max_spp, cluster=args.cluster, cache_dir=args.cache, progress=None)
+                 max_spp=args.max_spp, cluster=args.cluster, cache_dir=args.cache, progress=None,
+                 noise_floor=args.noise_floor)
     print(f"reference {r['reference_spp']} spp{' (capped)' if r['spp_capped'] else ''}, "
           f"noise floor FLIP {r['noise_floor_flip']:.4f}")
     for p in r["points"]:
@@ -65,7 +69,7 @@ def _cmd_tune(args) -> int:
 
     r = tune(args.scene, args.flip, _parsed_knobs(args), out_dir=args.out,
              params=dict(args.defines), max_spp=args.max_spp, cluster=args.cluster,
-             cache_dir=args.cache, progress=None)
+             cache_dir=args.cache, progress=None, noise_floor=args.noise_floor)
     if r["chosen"] is None:
         print(f"no measured setting meets FLIP {args.flip} (reference noise floor "
               f"{r['noise_floor_flip']:.4f}); see {args.out}/tradeoff.csv")
@@ -82,7 +86,7 @@ def _cmd_atlas(args) -> int:
     from mi_displace.evaluate.atlas import atlas
 
     r = atlas(args.out, scenes_dir=args.scenes, max_spp=args.max_spp, cluster=args.cluster,
-              cache_dir=args.cache, progress=None)
+              cache_dir=args.cache, progress=None, noise_floor=args.noise_floor)
     for name, message in r["failures"].items():
         print(f"  {name}: failed ({message})")
     print(f"wrote {args.out}/index.html ({len(r['scenes'])} scenes)")
