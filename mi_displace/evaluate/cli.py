@@ -93,20 +93,44 @@ def _cmd_atlas(args) -> int:
     return 1 if r["failures"] else 0
 
 
-def _cmd_animate(args) -> int:
-    from mi_displace.evaluate.frames import animate, parse_edit
+def run_animation(args, edits: list, endpoint: bool = False, spp: int | None = None) -> int:
+    """``animate`` with the options of :func:`animation_options` and the given edits: the
+    body of ``animate`` and of its aliases (``ddm-animate``, ``volume-animate``)."""
+    from mi_displace.evaluate.frames import animate
 
-    r = animate(args.scene, [parse_edit(e) for e in args.edits], args.frames, args.out,
-                params=dict(args.defines), spp=args.spp, chunk=args.chunk, cluster=args.cluster,
-                progress=None)
+    r = animate(args.scene, edits, args.frames, args.out, params=dict(args.defines),
+                spp=args.spp or spp, chunk=args.chunk, cluster=args.cluster, progress=None,
+                endpoint=endpoint)
     for job, message in r["failed"].items():
         print(f"  chunk {job}: failed ({message})")
     written = [p for p in r["frames"] if p is not None]
     times = [t for t in r["render_s"] if t is not None]
     if times:
         print(f"wrote {len(written)} frames to {args.out} "
-              f"(median render {sorted(times)[len(times) // 2]:.3g} s per frame)")
+              f"(median render {sorted(times)[len(times) // 2]:.3g} s per frame, "
+              f"frames.json)")
     return 1 if r["failed"] else 0
+
+
+def _cmd_animate(args) -> int:
+    from mi_displace.evaluate.frames import parse_edit
+
+    return run_animation(args, [parse_edit(e) for e in args.edits], endpoint=args.endpoint)
+
+
+def animation_options(p, frames: int = 24) -> None:
+    """The options every frame command shares: ``--frames --spp --chunk --cluster -D --out``."""
+    from mi_displace.cli import _define, _positive_int
+
+    p.add_argument("--frames", type=_positive_int, default=frames,
+                   help=f"number of frames ({frames})")
+    p.add_argument("--spp", type=_positive_int, default=None, help="samples per pixel")
+    p.add_argument("--chunk", type=_positive_int, default=8, help="frames per job (8)")
+    p.add_argument("--cluster", default=None, metavar="ADDRESS",
+                   help="render the chunks on a Dask cluster: tcp://HOST:PORT, or local:N")
+    p.add_argument("-D", dest="defines", action="append", type=_define, default=[],
+                   metavar="NAME=VALUE", help="scene parameter; repeatable")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
 
 
 def add_commands(sub) -> dict:
@@ -136,18 +160,12 @@ def add_commands(sub) -> dict:
     _sweep_options(p)
     p.add_argument("--out", type=Path, required=True, help="output folder")
 
-    from mi_displace.cli import _positive_int
-
     p = sub.add_parser("animate", help="render frames of mi.traverse edits (chunks as jobs)")
     p.add_argument("scene", type=Path, help="scene XML")
     p.add_argument("--edit", dest="edits", action="append", default=[], required=True,
                    metavar="ID.PARAM=START:STOP", help="parameter stepped over the frames")
-    p.add_argument("--frames", type=_positive_int, default=24, help="number of frames (24)")
-    p.add_argument("--spp", type=_positive_int, default=None, help="samples per pixel")
-    p.add_argument("--chunk", type=_positive_int, default=8, help="frames per job (8)")
-    p.add_argument("--cluster", default=None, metavar="ADDRESS",
-                   help="render the chunks on a Dask cluster: tcp://HOST:PORT, or local:N")
-    defines(p)
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--endpoint", action="store_true",
+                   help="the last frame at STOP (default: STOP excluded, for loops)")
+    animation_options(p)
     return {"tradeoff": _cmd_tradeoff, "tune": _cmd_tune, "atlas": _cmd_atlas,
             "animate": _cmd_animate}
