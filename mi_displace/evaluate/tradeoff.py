@@ -509,18 +509,28 @@ def write_outputs(out_dir, result: dict, reference: np.ndarray, images: dict) ->
     plot(result, out_dir / "tradeoff.png")
 
 
-def plot(result: dict, path) -> Path:
+def plot(result: dict, path=None, ax=None, title: str | None = None) -> Path | None:
     """Error against warm time, log-log: every point labelled, the Pareto front joined, the
-    reference's noise floor as a dashed line and the path tracer's own curve."""
+    reference's noise floor as a dashed line and the path tracer's own curve.
+
+    Args:
+        result: :func:`tradeoff`'s result.
+        path: PNG to write (a figure of its own), or ``None`` with ``ax``.
+        ax: a Matplotlib axes to draw into instead (a panel of a larger figure).
+        title: the axes' title (default: the scene's file name).
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(7.5, 5.0))
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot(1, 1, 1)
+    fig = None
+    if ax is None:
+        fig = Figure(figsize=(7.5, 5.0))
+        FigureCanvasAgg(fig)
+        ax = fig.add_subplot(1, 1, 1)
     curve = result["path_curve"]
-    ax.plot([p["time_s"] for p in curve], [p["flip"] for p in curve], "o-", color="0.55",
-            label=f"{result['reference_integrator']} (error vs spp)")
+    if curve:
+        ax.plot([p["time_s"] for p in curve], [p["flip"] for p in curve], "o-", color="0.55",
+                label=f"{result['reference_integrator']} (error vs spp)")
     for p in curve:
         ax.annotate(f"{p['spp']}", (p["time_s"], p["flip"]), fontsize=6, color="0.4",
                     xytext=(3, 3), textcoords="offset points")
@@ -533,18 +543,41 @@ def plot(result: dict, path) -> Path:
     for r in ok:
         ax.annotate(r["label"], (r["time_warm_s"], r["flip"]), fontsize=7, xytext=(4, -9),
                     textcoords="offset points")
-    ax.axhline(result["noise_floor_flip"], ls="--", color="C2",
-               label=f"reference noise floor ({result['reference_spp']} spp)")
+    if result["noise_floor_flip"] > 0:  # a deterministic reference (raster) has none
+        ax.axhline(result["noise_floor_flip"], ls="--", color="C2",
+                   label=f"reference noise floor ({result['reference_spp']} spp)")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("warm time per frame (s, build included)")
     ax.set_ylabel("mean FLIP against the reference")
-    ax.set_title(Path(result["scene"]).name, fontsize=10)
+    ax.set_title(title or Path(result["scene"]).name, fontsize=10)
     ax.grid(True, which="both", alpha=0.25)
     ax.legend(fontsize=7, loc="best")
+    if fig is None:
+        return None
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     return Path(path)
+
+
+def table_rows(result: dict) -> list[dict]:
+    """One flat dict per rendered point of a sweep: its knob values, the
+    :data:`CSV_COLUMNS` and its ``inspected`` measurements (for tables of figures)."""
+    return [{**r["point"], **{k: r.get(k) for k in CSV_COLUMNS}, **(r.get("inspected") or {})}
+            for r in result["points"] if r["ok"]]
+
+
+def markdown(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
+    """A Markdown table: ``columns`` are ``(header, key, format spec)``; missing values '–'."""
+    def cell(row, key, spec):
+        value = row.get(key)
+        if value is None:
+            return "–"
+        return format(value, spec) if spec else str(value)
+
+    head = "| " + " | ".join(c[0] for c in columns) + " |\n|" + "---|" * len(columns) + "\n"
+    return head + "".join("| " + " | ".join(cell(r, key, spec) for _, key, spec in columns)
+                          + " |\n" for r in rows)
 
 
 def tune(scene_path, flip_budget: float, knobs: list[Knob] | None = None, out_dir=None,
