@@ -143,6 +143,8 @@ def test_unknown_knob_refused_before_rendering(variant_llvm, monkeypatch, tmp_pa
         tr.tradeoff(SCENE, [tr.parse_knob("resolutio=1,2")], cache_dir=tmp_path)
     with pytest.raises(ValueError, match="bal.scale"):
         tr.tradeoff(SCENE, [tr.parse_knob("bal.scale=0.1")], cache_dir=tmp_path)
+    with pytest.raises(ValueError, match="resolutio"):  # an explicit point's knob too
+        tr.tradeoff(SCENE, None, points=[{"resolution": 8}, {"resolutio": 8}], cache_dir=tmp_path)
     for text in ("resolution", "resolution=", "=1,2", "resolution=1,1", "a b=1"):
         with pytest.raises(ValueError, match="--knob"):
             tr.parse_knob(text)
