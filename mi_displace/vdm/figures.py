@@ -163,7 +163,7 @@ def _plot_sweeps(out: Path, result: dict, terms: list[dict], sizes: list[dict]) 
     tr.plot(result, ax=fig.add_subplot(1, 3, 1), title="VDM on the torus: error vs time")
     ax = fig.add_subplot(1, 3, 2)
     a = [t for t in terms if t["mvm_terms"] == min(t["svd_terms"], 4)]
-    b = [t for t in terms if t["svd_terms"] == 8]
+    b = sorted((t for t in terms if t["svd_terms"] == 8), key=lambda t: t["mvm_terms"])
     ax.plot([t["svd_terms"] for t in a], [t["flip"] for t in a], "o-", label="FLIP, svd_terms (mvm = min(k, 4))")
     ax.plot([t["mvm_terms"] for t in b], [t["flip"] for t in b], "s--", label="FLIP, mvm_terms (svd = 8)")
     ax.semilogy([t["svd_terms"] for t in a], [t["rmse_vdm"] for t in a], "o:", label="VDM RMSE [tile]")
