@@ -6,11 +6,13 @@
   FLIP ``F``, verified by a fresh render, printed as ``-D`` values (``DIR/tune.json``).
 * ``atlas --out DIR [--scenes DIR]``: every showcase scene's declared sweep on one HTML page
   (:mod:`mi_displace.evaluate.atlas`).
-* ``animate SCENE.xml --edit ID.PARAM=A:B [--edit ...] --frames N --out DIR``: frames of
-  ``mi.traverse`` edits (:mod:`mi_displace.evaluate.frames`), chunks of frames as jobs.
+* ``animate SCENE.xml --edit ID.PARAM=A:B [--edit ...] --frames N [--endpoint] --out DIR``:
+  frames of ``mi.traverse`` edits (:mod:`mi_displace.evaluate.frames`), chunks of frames as
+  jobs; ``ddm-animate`` and ``volume-animate`` are aliases (:func:`run_animation`).
 
 All four take ``--cluster ADDRESS`` (a Dask scheduler, or ``local:N`` for N local worker
-processes), ``--max-spp`` and ``--cache DIR`` (finished points, keyed by code version).
+processes); the sweeps also ``--max-spp``, ``--noise-floor FLIP`` (the reference's target)
+and ``--cache DIR`` (finished points, keyed by code version).
 """
 from __future__ import annotations
 
