@@ -562,9 +562,10 @@ def plot(result: dict, path=None, ax=None, title: str | None = None) -> Path | N
 
 def table_rows(result: dict) -> list[dict]:
     """One flat dict per rendered point of a sweep: its knob values, the
-    :data:`CSV_COLUMNS` and its ``inspected`` measurements (for tables of figures)."""
-    return [{**r["point"], **{k: r.get(k) for k in CSV_COLUMNS}, **(r.get("inspected") or {})}
-            for r in result["points"] if r["ok"]]
+    :data:`CSV_COLUMNS`, ``build_stats`` and its ``inspected`` measurements (for tables of
+    figures)."""
+    return [{**r["point"], **{k: r.get(k) for k in (*CSV_COLUMNS, "build_stats")},
+             **(r.get("inspected") or {})} for r in result["points"] if r["ok"]]
 
 
 def markdown(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:

@@ -51,22 +51,26 @@ def fig10(quick: bool, cache_dir=None) -> dict:
     counts = (4, 16, 64) if quick else (4, 8, 16, 32, 64, 128)
     knobs = [tr.parse_knob(f"direction={','.join(DIRECTIONS)}"),
              tr.parse_knob(f"slices={','.join(map(str, counts))}")]
-    rows, sweeps = [], {}
+    sweeps = {}
     for theta in (30, 60, 85):
         elevation = f"{6 / math.tan(math.radians(theta)):.4f}"
-        result = _sweep("slicing_plane_grazing.xml", {"res": res, "elevation": elevation},
-                        128 if quick else 512, cache_dir, knobs=knobs)
-        sweeps[theta] = result
-        for r in tr.table_rows(result):
-            rows.append({"theta_deg": theta, "direction": r["direction"], "slices": int(r["slices"]),
-                         "flip": r["flip"], "noise_floor": result["noise_floor_flip"],
-                         "render_s": r["render_warm_s"], "time_warm_s": r["time_warm_s"],
-                         "build_s": r["build_s"], "slice_triangles": _shape_stat(r, "slice_triangles")})
-    return {"resolution": res, "rows": rows, "tradeoff": sweeps}
+        sweeps[theta] = _sweep("slicing_plane_grazing.xml", {"res": res, "elevation": elevation},
+                               128 if quick else 512, cache_dir, knobs=knobs)
+    return {"resolution": res, "rows": fig10_rows(sweeps), "tradeoff": sweeps}
 
 
-def tradeoff(quick: bool, cache_dir=None) -> dict:
-    res = 64 if quick else 128
+def fig10_rows(sweeps: dict) -> list[dict]:
+    """The Fig. 10 table from its sweeps (``{view angle: tradeoff result}``)."""
+    return [{"theta_deg": int(theta), "direction": r["direction"], "slices": int(r["slices"]),
+             "flip": r["flip"], "noise_floor": result["noise_floor_flip"],
+             "render_s": r["render_warm_s"], "time_warm_s": r["time_warm_s"],
+             "build_s": r["build_s"], "slice_triangles": _shape_stat(r, "slice_triangles")}
+            for theta, result in sweeps.items() for r in tr.table_rows(result)]
+
+
+def donut_methods(quick: bool) -> list[tuple[str, dict]]:
+    """``(method, point)`` of the donut sweep: slicing per direction and count, ``auto``,
+    relief steps, VDM, true displacement under raster at several tessellations."""
     counts = (4, 16) if quick else (4, 12, 25, 48)
     methods = [("slicing " + d, {"direction": d, "slices": n}) for d in DIRECTIONS for n in counts]
     methods.append(("slicing best auto", {"direction": "best", "slices": "auto"}))
@@ -75,9 +79,23 @@ def tradeoff(quick: bool, cache_dir=None) -> dict:
     methods.append(("vdm", {"mode": "vdm"}))
     methods += [("displaced (raster)", {"mode": "reference", "resolution": n})
                 for n in ((128, 512) if quick else (128, 256, 512, 1024))]
+    return methods
+
+
+def tradeoff(quick: bool, cache_dir=None) -> dict:
+    res = 64 if quick else 128
+    methods = donut_methods(quick)
     result = _sweep("slicing_donut.xml", {"res": res}, 256 if quick else 1024, cache_dir,
                     points=[p for _, p in methods],
                     path_spps=(1, 8, 32) if quick else (1, 4, 16, 64, 256))
+    return {"resolution": res, "reference_spp": result["reference_spp"],
+            "noise_floor": result["noise_floor_flip"], "reference_s": result["reference_time_s"],
+            "rows": donut_rows(result, methods), "tradeoff": result}
+
+
+def donut_rows(result: dict, methods: list[tuple[str, dict]]) -> list[dict]:
+    """The donut table from its sweep: one row per ``(method, point)`` that rendered, then
+    the path curve."""
     by_label = {r["label"]: r for r in tr.table_rows(result)}
     rows = []
     for method, point in methods:
@@ -93,9 +111,7 @@ def tradeoff(quick: bool, cache_dir=None) -> dict:
     rows += [{"method": "path", "knob": c["spp"], "flip": c["flip"], "build_s": 0.0,
               "render_s": c["render_s"], "time_warm_s": c["time_s"], "bytes": None}
              for c in result["path_curve"]]
-    return {"resolution": res, "reference_spp": result["reference_spp"],
-            "noise_floor": result["noise_floor_flip"], "reference_s": result["reference_time_s"],
-            "rows": rows, "tradeoff": result}
+    return rows
 
 
 def depth(quick: bool, cache_dir=None) -> dict:
