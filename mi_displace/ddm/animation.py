@@ -21,7 +21,6 @@ from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
 from mi_displace.ddm.tiles import Tile
 
@@ -105,42 +104,3 @@ def metamorphose(p1, n1, p2, n2, alpha):
     length = dr.norm(nh)
     n = dr.select(length > 1e-12, nh / dr.maximum(length, 1e-30), n1)
     return p, n
-
-
-def frame_times(frames: int, duration: float) -> np.ndarray:
-    """``frames`` evenly spaced times in [0, duration)."""
-    if int(frames) != frames or frames < 1:
-        raise ValueError(f"frames: must be a positive integer, got {frames!r}")
-    if not (math.isfinite(duration) and duration > 0):
-        raise ValueError(f"duration: must be a positive number, got {duration!r}")
-    return np.arange(int(frames)) * (duration / frames)
-
-
-def render_frames(scene: mi.Scene, shape_id: str, times, out_dir, spp: int | None = None,
-                  prefix: str = "frame") -> list:
-    """Render an animation: for each time set ``<shape_id>.time`` through ``mi.traverse``
-    (the tiles are re-mapped, the topology and the geometry images are kept), render, and
-    write ``out_dir/<prefix>_NNNN.png``.
-
-    Returns:
-        The list of written paths.
-    """
-    from pathlib import Path
-
-    from mi_displace.core.io import write_png
-    from mi_displace.evaluate.metrics import assert_finite
-
-    params = mi.traverse(scene)
-    key = f"{shape_id}.time"
-    if key not in params:
-        raise ValueError(f"render_frames: the scene has no ddm shape with id {shape_id!r} "
-                         f"(no parameter {key!r})")
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    written = []
-    for index, t in enumerate(np.asarray(times, np.float64)):   # one render per frame
-        params[key] = float(t)
-        params.update()
-        image = assert_finite(np.asarray(mi.render(scene, spp=spp)), f"frame {index} (t={t})")
-        written.append(write_png(out_dir / f"{prefix}_{index:04d}.png", image[..., :3]))
-    return written

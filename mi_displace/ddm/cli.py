@@ -1,8 +1,8 @@
 """``mi-displace`` sub-commands of the DDM technique.
 
 * ``ddm-animate SCENE.xml --shape ID [--frames N] [--duration T] [--spp N] [-D k=v] --out DIR``
-  renders an animation (§4.2): ``ID.time`` is stepped through ``mi.traverse`` (no rebuild)
-  and each frame is written as ``DIR/frame_NNNN.png``.
+  renders an animation (§4.2): ``animate --edit ID.time=0:T`` — ``ID.time`` stepped through
+  ``mi.traverse`` over ``[0, T)`` (no rebuild), ``DIR/frame_NNNN.png`` and ``frames.json``.
 * ``ddm-figures [--out DIR] [--quick]`` writes the accuracy table and plot (``maps`` at
   32...1024 against ``exact``), the normal-method table and the ``map_resolution`` sweep of
   ``scenes/ddm_thorns_sphere.xml`` (default ``docs/figures``); ``--charts``: only the
@@ -16,14 +16,13 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _cmd_animate(args) -> int:
-    from mi_displace.ddm.animation import frame_times, render_frames
-    from mi_displace.render.scene import load
+    import math
 
-    scene, timings = load(args.scene, **dict(args.defines))
-    times = frame_times(args.frames, args.duration)
-    written = render_frames(scene, args.shape, times, args.out, spp=args.spp)
-    print(f"wrote {len(written)} frames to {args.out} (scene build {timings['build_s']:.3f} s)")
-    return 0
+    from mi_displace.evaluate.cli import run_animation
+
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        raise ValueError(f"--duration: must be a positive number, got {args.duration!r}")
+    return run_animation(args, [(f"{args.shape}.time", 0.0, args.duration)])
 
 
 def _cmd_figures(args) -> int:
@@ -42,17 +41,13 @@ def _cmd_figures(args) -> int:
 
 
 def add_commands(sub) -> dict:
-    from mi_displace.cli import _define, _positive_int
+    from mi_displace.evaluate.cli import animation_options
 
-    p = sub.add_parser("ddm-animate", help="render a DDM animation (steps SHAPE.time)")
+    p = sub.add_parser("ddm-animate", help="render a DDM animation (animate SHAPE.time=0:T)")
     p.add_argument("scene", type=Path, help="scene XML with a ddm shape")
     p.add_argument("--shape", required=True, help="id of the ddm shape")
-    p.add_argument("--frames", type=_positive_int, default=24, help="number of frames (24)")
     p.add_argument("--duration", type=float, default=1.0, help="time span of the frames (1.0)")
-    p.add_argument("--spp", type=_positive_int, default=None, help="samples per pixel")
-    p.add_argument("-D", dest="defines", action="append", type=_define, default=[],
-                   metavar="NAME=VALUE", help="scene parameter")
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    animation_options(p)
 
     p = sub.add_parser("ddm-figures", help="DDM accuracy table/plot and map_resolution sweep")
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "figures", help="output folder")

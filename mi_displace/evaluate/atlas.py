@@ -92,11 +92,13 @@ def _scene_section(name: str, result: dict, folder: Path) -> str:
         rows.append(f"<tr><td>{html.escape(r['label'])}</td><td>{thumb}</td>"
                     + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     capped = " (capped)" if result["spp_capped"] else ""
+    target = ("" if result.get("noise_floor_target") is None
+              else f" (target {_num(result['noise_floor_target'], 4)})")
     return (
         f'<h2 id="{html.escape(name)}">{html.escape(name)}</h2>\n'
         f"<p>reference: {html.escape(result['reference_integrator'])}, "
         f"{result['reference_spp']} spp{capped}, noise floor FLIP "
-        f"{_num(result['noise_floor_flip'], 4)}, {result['width']}×{result['height']}; "
+        f"{_num(result['noise_floor_flip'], 4)}{target}, {result['width']}×{result['height']}; "
         f"knobs: {html.escape(', '.join(k['name'] for k in result['knobs']))}</p>\n"
         f"{_img(folder / 'tradeoff.png', 640)}\n"
         "<table><tr><th>setting</th><th>image</th><th>FLIP</th><th>relMSE</th>"
@@ -142,8 +144,13 @@ path tracer reaches in the same time (– : nothing fits).</p>
 
 
 def atlas(out_dir, scenes_dir=None, max_spp: int = 1024, cluster: str | None = None,
-          cache_dir=None, progress: bool | None = False, warm_repeats: int = 3) -> dict:
+          cache_dir=None, progress: bool | None = False, warm_repeats: int = 3,
+          noise_floor: float | None = None) -> dict:
     """Sweep every atlas scene and write ``index.html`` and ``atlas.json`` (module docstring).
+
+    Each scene's reference doubles its spp until its two-seed noise floor is at most
+    ``noise_floor`` (or a fifth of the sweep's smallest error), capped at ``max_spp``: the
+    reference spp is chosen per scene.
 
     Returns:
         ``{"scenes": {name: tradeoff result}, "failures": {name: message}, "budgets": rows}``.
@@ -159,7 +166,8 @@ def atlas(out_dir, scenes_dir=None, max_spp: int = 1024, cluster: str | None = N
         try:
             results[name] = tr.tradeoff(path, tr.declared_knobs(path), out_dir=out_dir / name,
                                         max_spp=max_spp, cluster=cluster, cache_dir=cache_dir,
-                                        progress=progress, warm_repeats=warm_repeats)
+                                        progress=progress, warm_repeats=warm_repeats,
+                                        noise_floor=noise_floor)
         except (ValueError, FileNotFoundError) as e:  # one broken scene must not hide the rest
             failures[name] = " ".join(str(e).split())
     write_html(out_dir / "index.html", results, out_dir, failures)

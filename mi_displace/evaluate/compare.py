@@ -216,12 +216,13 @@ def write_panel(path: str | Path, reference, approximation, error_map, info: dic
     return path
 
 
-def _render_side(path, xml_params, mode, integrator, spp, edits=None) -> tuple[dict, np.ndarray, float]:
+def _render_side(path, xml_params, mode, integrator, spp, edits=None,
+                 inspect=None) -> tuple[dict, np.ndarray, float]:
     """Load the scene for one side, apply ``edits`` and render it once (seed 0).
 
     Returns ``(timings, image, seconds)``; ``timings["build_s"]`` includes the edits'
-    ``params.update()``.  The scene is released before returning, so consecutive calls never
-    hold two scenes.
+    ``params.update()``, ``timings["inspected"]`` is ``inspect(scene)`` when ``inspect`` is
+    given.  The scene is released before returning, so consecutive calls never hold two scenes.
     """
     scene, timings = scenes.load(path, **xml_params, mode=mode, integrator=integrator)
     if edits:
@@ -230,12 +231,15 @@ def _render_side(path, xml_params, mode, integrator, spp, edits=None) -> tuple[d
         timings["build_s"] += time.perf_counter() - start
     image, seconds = scenes.render(scene, spp=spp, seed=0)
     metrics.assert_finite(image, f"{mode} image of {path}")
+    if inspect is not None:
+        timings["inspected"] = inspect(scene)
     return timings, image, seconds
 
 
 def measure_approximation(scene_path, xml_params: dict, integrator: str, spp: int | None,
                           warm_repeats: int = 3, mode: str = "approximation",
-                          edits: dict | None = None, progress: bool | None = False) -> dict:
+                          edits: dict | None = None, progress: bool | None = False,
+                          inspect=None) -> dict:
     """Step 1 of the protocol: the approximation rendered cold, then ``warm_repeats`` times.
 
     Args:
@@ -247,11 +251,14 @@ def measure_approximation(scene_path, xml_params: dict, integrator: str, spp: in
         mode: the ``$mode`` to render (``approximation``, or another part of the scene).
         edits: ``mi.traverse`` parameters set after each load (see ``scene.apply_edits``).
         progress: a line per stage (:mod:`mi_displace.core.progress`; ``None``: on a terminal).
+        inspect: ``inspect(scene) -> dict`` called on the loaded scene of the last warm round
+            (after its render): measurements of the scene itself (table errors, normals, ...).
 
     Returns:
         dict with ``image`` (linear float32 ``(H, W, 3)``, the last warm round),
         ``time_cold_s``, ``build_cold_s``, ``render_cold_s``, ``time_warm_s`` (median of
-        build + render), ``build_s``, ``render_warm_s`` (medians) and ``build_stats``.
+        build + render), ``build_s``, ``render_warm_s`` (medians), ``build_stats`` and
+        ``inspected`` (``inspect``'s dict, or ``None``).
     """
     name = Path(scene_path).name
     with stage(f"{name}: {mode} ({integrator}), cold", progress) as s:
@@ -260,9 +267,9 @@ def measure_approximation(scene_path, xml_params: dict, integrator: str, spp: in
         s.note = f"build {cold['build_s']:.2f} s, render {render_cold:.2f} s"
     builds, renders = [], []
     with stage(f"{name}: {mode}, {warm_repeats} warm rounds", progress):
-        for _ in range(warm_repeats):
+        for i in range(warm_repeats):
             warm, image, seconds = _render_side(scene_path, xml_params, mode, integrator, spp,
-                                                edits)
+                                                edits, inspect if i == warm_repeats - 1 else None)
             builds.append(warm["build_s"])
             renders.append(seconds)
     return {
@@ -274,23 +281,28 @@ def measure_approximation(scene_path, xml_params: dict, integrator: str, spp: in
         "build_s": statistics.median(builds),
         "render_warm_s": statistics.median(renders),
         "build_stats": warm["shapes"],
+        "inspected": warm.get("inspected"),
     }
 
 
 def converge_reference(scene_path, xml_params: dict, integrator: str, approximations: list,
                        target_ratio: float = 0.2, max_spp: int = 1024,
-                       progress: bool | None = False) -> dict:
+                       progress: bool | None = False, noise_floor: float | None = None) -> dict:
     """Step 2 of the protocol: a reference converged against the given approximations.
 
     Two independent images (seed streams 0 and 1) get as many new samples again each round
-    until ``noise_floor <= target_ratio * min_i FLIP(reference, approximations[i])`` or the
-    next round would pass ``max_spp`` samples in total (``spp_capped``).
+    until ``noise_floor <= target_ratio * min_i FLIP(reference, approximations[i])`` — or,
+    when the ``noise_floor`` target is given, until the floor is at most that target, if
+    that comes first — or the next round would pass ``max_spp`` samples in total
+    (``spp_capped``).
 
     Args:
         scene_path, xml_params: as for :func:`measure_approximation`.
         integrator: the reference's integrator plugin type.
         approximations: linear ``(H, W, 3)`` images the reference must resolve (>= 1).
         target_ratio, max_spp: see :func:`compare`.
+        noise_floor: an absolute target of the two-seed noise floor (FLIP, in (0, 1); ``None``:
+            only the ratio rule).
         progress: a line per stage (build, each round with its noise floor and FLIP) and bars
             over long multi-pass renders (:mod:`mi_displace.core.progress`).
 
@@ -302,6 +314,9 @@ def converge_reference(scene_path, xml_params: dict, integrator: str, approximat
         ``render_cold_s`` (a 1-spp warm-up), ``build_stats`` and ``scene`` (the loaded
         reference scene, for further renders).
     """
+    if noise_floor is not None and not (isinstance(noise_floor, (int, float))
+                                        and 0 < noise_floor < 1):
+        raise ValueError(f"noise_floor: the target must lie in (0, 1), got {noise_floor!r}")
     name = Path(scene_path).name
     ref_params = dict(xml_params, mode="reference", integrator=integrator)
     with stage(f"{name}: reference ({integrator}), cold and warm build", progress):
@@ -323,19 +338,18 @@ def converge_reference(scene_path, xml_params: dict, integrator: str, approximat
                 images[side] = image if count == 0 else (images[side] * count + image * new) / (count + new)
             count += new
             reference = 0.5 * (images[0] + images[1])
-            noise_floor, _ = metrics.flip(images[0], images[1])
+            floor, _ = metrics.flip(images[0], images[1])
             results = [metrics.flip(reference, a) for a in approximations]
             flips = [f for f, _ in results]
-            s.note = f"noise floor {noise_floor:.4f}, FLIP {min(flips):.4f}"
-        rounds.append({"spp": 2 * count, "noise_floor_flip": noise_floor,
-                       "flip_mean": min(flips)})
-        if noise_floor <= target_ratio * min(flips):
+            s.note = f"noise floor {floor:.4f}, FLIP {min(flips):.4f}"
+        rounds.append({"spp": 2 * count, "noise_floor_flip": floor, "flip_mean": min(flips)})
+        if floor <= max(target_ratio * min(flips), noise_floor or 0.0):
             break
         if 4 * count > max_spp:
             spp_capped = True
             break
     return {
-        "reference": reference, "images": images, "noise_floor_flip": noise_floor,
+        "reference": reference, "images": images, "noise_floor_flip": floor,
         "flips": flips, "error_maps": [m for _, m in results], "rounds": rounds,
         "spp": 2 * count, "spp_capped": spp_capped, "build_s": ref_warm["build_s"],
         "build_cold_s": ref_cold["build_s"], "render_s": render_s,

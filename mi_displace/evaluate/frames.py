@@ -2,15 +2,21 @@
 
 ``mi-displace animate SCENE.xml --edit ID.PARAM=A:B [--edit ...] --frames N --out DIR``
 renders frame ``i`` with every edited parameter at ``A + (B - A) * i / N`` (the end is
-excluded, so a periodic animation loops without a repeated frame).  Frames are split into
+excluded, so a periodic animation loops without a repeated frame; ``--endpoint``:
+``A + (B - A) * i / (N - 1)``, first and last frame at A and B, for a progressing cut).  Frames are split into
 chunks; each chunk is one job (:func:`mi_displace.evaluate.jobs.run_jobs`) that loads the
 scene once and renders its frames through ``mi.traverse`` edits (no rebuild of what the
 edit does not change), so ``--cluster`` spreads chunks over workers.  The PNG bytes come back
-to the caller, who writes ``DIR/frame_NNNN.png``; the result is the same image for image
-whichever machine rendered it (same seeds per frame).
+to the caller, who writes ``DIR/frame_NNNN.png`` and ``DIR/frames.json`` (per frame: the
+edited values, the edit's ``params.update()`` time, the render time and the host); the result
+is the same image for image whichever machine rendered it (same seeds per frame).
+
+``ddm-animate`` (``ID.time`` over ``[0, duration)``) and ``volume-animate`` (one map
+parameter, end included) are this command with their own option names.
 """
 from __future__ import annotations
 
+import json
 import re
 import tempfile
 from pathlib import Path
@@ -39,11 +45,13 @@ def parse_edit(text: str) -> tuple[str, float, float]:
     return match.group(1), start, stop
 
 
-def frame_edits(edits: list[tuple[str, float, float]], frames: int) -> list[dict]:
-    """The ``{key: value}`` of every frame (module docstring)."""
+def frame_edits(edits: list[tuple[str, float, float]], frames: int,
+                endpoint: bool = False) -> list[dict]:
+    """The ``{key: value}`` of every frame (module docstring; ``endpoint``: B included)."""
     if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
         raise ValueError(f"--frames: must be a positive integer, got {frames!r}")
-    return [{key: start + (stop - start) * i / frames for key, start, stop in edits}
+    steps = frames - 1 if endpoint and frames > 1 else frames
+    return [{key: start + (stop - start) * i / steps for key, start, stop in edits}
             for i in range(frames)]
 
 
@@ -76,7 +84,8 @@ def render_chunk(scene_path: str, params: dict, frames: list[tuple[int, dict]],
 
 def animate(scene_path, edits: list[tuple[str, float, float]], frames: int, out_dir,
             params: dict | None = None, spp: int | None = None, seed: int = 0,
-            chunk: int = 8, cluster: str | None = None, progress: bool | None = False) -> dict:
+            chunk: int = 8, cluster: str | None = None, progress: bool | None = False,
+            endpoint: bool = False) -> dict:
     """Render the frames (module docstring) and write ``out_dir/frame_NNNN.png``.
 
     Args:
@@ -89,9 +98,11 @@ def animate(scene_path, edits: list[tuple[str, float, float]], frames: int, out_
         chunk: frames per job.
         cluster: ``None``, ``"local:N"`` or a Dask scheduler address.
         progress: a progress bar over the chunks.
+        endpoint: the last frame at the edits' end values (module docstring).
 
     Returns:
-        ``{"frames": [paths], "render_s": [per frame], "hosts": [per frame], "failed": {...}}``.
+        ``{"frames": [paths], "edits": [values per frame], "render_s", "edit_s", "hosts"
+        (per frame), "failed": {chunk: message}}``, also written to ``out_dir/frames.json``.
 
     Raises:
         ValueError: bad arguments or a key the scene does not have (checked by loading the
@@ -99,7 +110,7 @@ def animate(scene_path, edits: list[tuple[str, float, float]], frames: int, out_
     """
     if not edits:
         raise ValueError("--edit: give at least one ID.PARAM=START:STOP")
-    per_frame = frame_edits(edits, frames)
+    per_frame = frame_edits(edits, frames, endpoint)
     if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
         raise ValueError(f"chunk: must be a positive integer, got {chunk!r}")
     params = scenes.check_params(params)
@@ -111,7 +122,8 @@ def animate(scene_path, edits: list[tuple[str, float, float]], frames: int, out_
              "spp": spp, "seed": seed} for i in range(0, frames, chunk)]
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths, render_s, hosts, failed = [None] * frames, [None] * frames, [None] * frames, {}
+    paths, render_s, edit_s, hosts = ([None] * frames for _ in range(4))
+    failed = {}
 
     def done(job_index, outcome):
         if not outcome["ok"]:
@@ -122,8 +134,15 @@ def animate(scene_path, edits: list[tuple[str, float, float]], frames: int, out_
             path.write_bytes(frame["png"])
             paths[frame["index"]] = path
             render_s[frame["index"]] = frame["render_s"]
+            edit_s[frame["index"]] = frame["edit_s"]
             hosts[frame["index"]] = outcome["host"]
 
     run_jobs(render_chunk, jobs, cluster=cluster, on_result=done, progress=progress,
              desc="frames")
-    return {"frames": paths, "render_s": render_s, "hosts": hosts, "failed": failed}
+    records = [{"index": i, "file": None if p is None else p.name, "edits": per_frame[i],
+                "edit_s": edit_s[i], "render_s": render_s[i], "host": hosts[i]}
+               for i, p in enumerate(paths)]
+    (out_dir / "frames.json").write_text(json.dumps({"frames": records, "failed": failed},
+                                                    indent=2))
+    return {"frames": paths, "edits": per_frame, "render_s": render_s, "edit_s": edit_s,
+            "hosts": hosts, "failed": failed}

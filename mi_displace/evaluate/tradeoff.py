@@ -7,9 +7,13 @@
   included, as :func:`compare.measure_approximation`) and its cold time;
 * its error against one converged reference (FLIP, relMSE, PSNR), the reference being
   converged by :func:`compare.converge_reference` until its two-seed noise floor is at most
-  ``target_ratio`` times the *smallest* error of the sweep (or ``max_spp``);
-* the reference integrator's own curve: the same integrator at 1, 2, 4, ... spp (seeds that
-  the reference did not use), its FLIP against the reference and its warm time;
+  ``target_ratio`` times the *smallest* error of the sweep, or at most the absolute target
+  ``noise_floor`` when one is given (whichever comes first), or ``max_spp``;
+* the reference integrator's own curve: the same integrator at 1, 2, 4, ... spp up to a
+  quarter of the reference's (seeds that the reference did not use), its FLIP against the
+  reference and its warm time;
+* optionally ``inspect(scene) -> dict``: measurements of the loaded approximation scene
+  itself (a table's reconstruction error, a normal's angle error, ...), per point;
 * the crossover: how long the path tracer needs to reach each point's error (log-log
   interpolation along its curve; ``None`` when it does not get there within the curve).
 
@@ -24,7 +28,10 @@ Knobs
 * ``ID.PARAM`` with a dot: a ``mi.traverse`` parameter of the loaded approximation scene, set
   after each load (:func:`mi_displace.render.scene.apply_edits`).
 
-Unknown knobs are refused before anything renders.  A point whose value the plugin refuses
+The swept points are the product of the knobs' values, or an explicit list of points
+(``points=[{NAME: VALUE, ...}, ...]``, each naming any subset of the knobs — a figure that
+varies one parameter at a time, or pairs values).  Unknown knobs are refused before anything
+renders.  A point whose value the plugin refuses
 (``ValueError``) is skipped and recorded with the reason; the sweep goes on.  Scenes may
 declare their own knobs for ``atlas``/``tune`` with comments ``<!-- tradeoff: NAME=V1,V2 -->``.
 
@@ -64,7 +71,7 @@ from mi_displace.render import scene as scenes
 DECLARED_KNOB = re.compile(r"<!--\s*tradeoff:\s*([^>]*?)\s*-->")
 #: CSV columns (and the per-point keys of ``tradeoff.json``).
 CSV_COLUMNS = ("label", "ok", "flip", "relmse", "psnr", "time_warm_s", "time_cold_s",
-               "build_s", "render_warm_s", "pareto", "path_crossover_s", "path_crossover_spp",
+               "build_s", "build_cold_s", "render_warm_s", "pareto", "path_crossover_s", "path_crossover_spp",
                "host", "cached", "error")
 
 
@@ -152,6 +159,23 @@ def sweep_points(knobs: list[Knob]) -> list[dict[str, str]]:
             for combo in itertools.product(*[k.values for k in knobs])]
 
 
+def knobs_of(points: list[dict]) -> list[Knob]:
+    """The knobs an explicit list of points names (values as text, in order of appearance).
+
+    Raises:
+        ValueError: no point, or a point naming no knob.
+    """
+    if not points or not all(points):
+        raise ValueError("points: give at least one point, each naming at least one knob")
+    values: dict[str, list[str]] = {}
+    for point in points:
+        for name, value in point.items():
+            seen = values.setdefault(name, [])
+            if str(value) not in seen:
+                seen.append(str(value))
+    return [parse_knob(f"{name}={','.join(vals)}") for name, vals in values.items()]
+
+
 def point_label(point: dict[str, str]) -> str:
     """``name=value`` pairs of a point, comma separated."""
     return ",".join(f"{k}={v}" for k, v in point.items())
@@ -225,16 +249,17 @@ def _cache_write(cache_dir: Path, key: str, record: dict) -> None:
 
 
 def measure_point(scene_path: str, xml_params: dict, integrator: str, spp: int | None,
-                  warm_repeats: int, mode: str, edits: dict) -> dict:
+                  warm_repeats: int, mode: str, edits: dict, inspect=None) -> dict:
     """One sweep point: :func:`compare.measure_approximation` (a job of :func:`run_jobs`)."""
     return cmp.measure_approximation(scene_path, xml_params, integrator, spp, warm_repeats,
-                                     mode=mode, edits=edits)
+                                     mode=mode, edits=edits, inspect=inspect)
 
 
 def _point_job(scene_path, settings, point: dict[str, str], knobs: list[Knob],
-               warm_repeats: int) -> dict:
+               warm_repeats: int, inspect=None) -> dict:
     """Keyword arguments of :func:`measure_point` for one point."""
     kinds = {k.name: k.kind for k in knobs}
+    point = {name: str(value) for name, value in point.items()}
     xml_params = dict(settings["xml_params"])
     integrator, spp, mode, edits = (settings["approximation_integrator"],
                                     settings["approximation_spp"], "approximation", {})
@@ -252,7 +277,13 @@ def _point_job(scene_path, settings, point: dict[str, str], knobs: list[Knob],
         else:
             xml_params[name] = value
     return {"scene_path": str(scene_path), "xml_params": xml_params, "integrator": integrator,
-            "spp": spp, "warm_repeats": warm_repeats, "mode": mode, "edits": edits}
+            "spp": spp, "warm_repeats": warm_repeats, "mode": mode, "edits": edits,
+            "inspect": inspect}
+
+
+def _callable_name(fn) -> str | None:
+    """``module.qualname`` of a function (cache keys name it; its source is in code_version)."""
+    return None if fn is None else f"{fn.__module__}.{fn.__qualname__}"
 
 
 def pareto_front(times: list[float], errors: list[float]) -> list[bool]:
@@ -314,15 +345,17 @@ def path_curve(ref: dict, spps: list[int], seed_base: int = 1 << 20) -> list[dic
     return curve
 
 
-def tradeoff(scene_path, knobs: list[Knob], out_dir=None, params: dict | None = None,
+def tradeoff(scene_path, knobs: list[Knob] | None, out_dir=None, params: dict | None = None,
              max_spp: int = 1024, target_ratio: float = 0.2, warm_repeats: int = 3,
              cluster: str | None = None, cache_dir=None, progress: bool | None = False,
-             path_spps: list[int] | None = None) -> dict:
+             path_spps: list[int] | None = None, noise_floor: float | None = None,
+             points: list[dict] | None = None, inspect=None) -> dict:
     """Sweep ``knobs`` on a comparison scene (module docstring); write CSV, JSON and a plot.
 
     Args:
         scene_path: scene XML following the comparison convention.
-        knobs: the knobs (:func:`parse_knob`); their product is swept.
+        knobs: the knobs (:func:`parse_knob`); their product is swept unless ``points`` is
+            given (``None`` with ``points``: :func:`knobs_of` them).
         out_dir: output folder for ``tradeoff.csv``, ``tradeoff.json``, ``tradeoff.png``
             (``None``: nothing written).
         params: fixed XML parameters for both sides.
@@ -331,38 +364,54 @@ def tradeoff(scene_path, knobs: list[Knob], out_dir=None, params: dict | None = 
         cluster: ``None``, ``"local:N"`` or a Dask scheduler address.
         cache_dir: point cache (``None``: :func:`default_cache_dir`).
         progress: progress bars.
-        path_spps: spp of the path curve (default 1, 2, 4, ... up to ``max_spp // 4``).
+        path_spps: spp of the path curve (default 1, 2, 4, ... up to a quarter of the
+            reference's spp; ``[]``: none, e.g. when the reference integrator is ``raster``).
+        noise_floor: absolute target of the reference's noise floor (FLIP): the reference
+            stops doubling once its floor is below it even if the ratio rule is not met.
+        points: explicit points instead of the product (module docstring).
+        inspect: a module-level ``inspect(scene) -> dict`` run on each point's loaded
+            approximation scene (on the worker; its name is part of the cache key).
 
     Returns:
         The dict written to ``tradeoff.json``: ``points`` (one dict per point: ``point``,
-        ``label``, :data:`CSV_COLUMNS`, ``build_stats``), ``path_curve``, ``noise_floor_flip``,
-        ``reference_spp``, ``spp_capped`` and the settings.
+        ``label``, :data:`CSV_COLUMNS`, ``build_stats``, ``inspected``), ``path_curve``,
+        ``noise_floor_flip``, ``reference_spp``, ``spp_capped`` and the settings.
     """
     import mitsuba as mi
 
     scene_path = Path(scene_path)
     settings = cmp.protocol_settings(scene_path, params)
+    if points is not None:
+        knobs = knobs or knobs_of(points)
+        unknown = sorted({n for p in points for n in p} - {k.name for k in knobs})
+        if unknown:
+            raise ValueError(f"points: {', '.join(unknown)} is not among the knobs")
     check_knobs(scene_path, knobs, params)
     jobs_mod.check_cluster(cluster)
     if not isinstance(warm_repeats, int) or warm_repeats < 3:
         raise ValueError(f"warm_repeats: must be an integer >= 3, got {warm_repeats!r}")
     if not isinstance(max_spp, int) or max_spp < 2:
         raise ValueError(f"max_spp: must be an integer >= 2, got {max_spp!r}")
+    if noise_floor is not None and not (isinstance(noise_floor, (int, float))
+                                        and 0 < noise_floor < 1):
+        raise ValueError(f"--noise-floor: the target must lie in (0, 1), got {noise_floor!r}")
     cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    points = sweep_points(knobs)
+    points = (sweep_points(knobs) if points is None
+              else [{name: str(value) for name, value in p.items()} for p in points])
 
     # 1. the approximation at every point: cached, or run as jobs (locally / on the cluster)
     records: list[dict | None] = [None] * len(points)
     pending, keys = [], []
     for index, point in enumerate(points):
         try:
-            job = _point_job(scene_path, settings, point, knobs, warm_repeats)
+            job = _point_job(scene_path, settings, point, knobs, warm_repeats, inspect)
         except ValueError as e:
             records[index] = {"ok": False, "error": f"ValueError: {e}", "cached": False}
             keys.append(None)
             continue
         key = _cache_key(scene=scene_digest(scene_path, {**job["xml_params"], "mode": job["mode"]}),
-                         job={k: v for k, v in job.items() if k != "scene_path"},
+                         job={**{k: v for k, v in job.items() if k != "scene_path"},
+                              "inspect": _callable_name(inspect)},
                          variant=mi.variant())
         keys.append(key)
         cached = _cache_read(cache_dir, key)
@@ -393,9 +442,9 @@ def tradeoff(scene_path, knobs: list[Knob], out_dir=None, params: dict | None = 
     ref = cmp.converge_reference(scene_path, settings["xml_params"],
                                  settings["reference_integrator"],
                                  [records[i]["image"] for i in good], target_ratio, max_spp,
-                                 progress)
+                                 progress, noise_floor)
     if path_spps is None:
-        path_spps = [2 ** k for k in range(int(math.log2(max(1, max_spp // 4))) + 1)]
+        path_spps = [2 ** k for k in range(int(math.log2(max(1, ref["spp"] // 4))) + 1)]
     curve = path_curve(ref, path_spps)
     del ref["scene"]
 
@@ -413,11 +462,12 @@ def tradeoff(scene_path, knobs: list[Knob], out_dir=None, params: dict | None = 
                "error": record.get("error")}
         if record["ok"]:
             t, s = crossover(curve, record["flip"])
-            row.update({k: record[k] for k in ("flip", "relmse", "psnr", "time_warm_s",
-                                               "time_cold_s", "build_s", "render_warm_s")},
+            row.update({k: record.get(k) for k in ("flip", "relmse", "psnr", "time_warm_s",
+                                                   "time_cold_s", "build_s", "build_cold_s",
+                                                   "render_warm_s")},
                        pareto=front[good.index(index)], path_crossover_s=t,
                        path_crossover_spp=s, build_stats=record.get("build_stats"),
-                       measured_at=record.get("measured_at"))
+                       inspected=record.get("inspected"), measured_at=record.get("measured_at"))
         rows.append(row)
     result = {
         "scene": str(scene_path.resolve()), "params": scenes.check_params(params),
@@ -426,7 +476,9 @@ def tradeoff(scene_path, knobs: list[Knob], out_dir=None, params: dict | None = 
         "width": int(ref["reference"].shape[1]), "height": int(ref["reference"].shape[0]),
         "reference_integrator": settings["reference_integrator"],
         "reference_spp": ref["spp"], "spp_capped": ref["spp_capped"], "max_spp": max_spp,
-        "target_ratio": target_ratio, "noise_floor_flip": ref["noise_floor_flip"],
+        "reference_rounds": ref["rounds"],
+        "target_ratio": target_ratio, "noise_floor_target": noise_floor,
+        "noise_floor_flip": ref["noise_floor_flip"], "inspect": _callable_name(inspect),
         "reference_time_s": ref["build_s"] + ref["render_s"],
         "points": rows, "path_curve": curve,
     }
@@ -444,29 +496,41 @@ def write_outputs(out_dir, result: dict, reference: np.ndarray, images: dict) ->
     out_dir.mkdir(parents=True, exist_ok=True)
     with open(out_dir / "tradeoff.json", "w") as f:
         json.dump(cmp._finite_or_none(result), f, indent=2, allow_nan=False)
+    inspected = list(dict.fromkeys(k for row in result["points"]
+                                   for k in (row.get("inspected") or {})))
     with open(out_dir / "tradeoff.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=CSV_COLUMNS, extrasaction="ignore")
+        writer = csv.DictWriter(f, fieldnames=[*CSV_COLUMNS, *inspected], extrasaction="ignore")
         writer.writeheader()
         for row in result["points"]:
-            writer.writerow({k: row.get(k) for k in CSV_COLUMNS})
+            writer.writerow({**{k: row.get(k) for k in CSV_COLUMNS}, **(row.get("inspected") or {})})
     write_exr(out_dir / "reference.exr", reference)
     for index, image in images.items():
         write_image(out_dir / f"point_{index}.png", image)
     plot(result, out_dir / "tradeoff.png")
 
 
-def plot(result: dict, path) -> Path:
+def plot(result: dict, path=None, ax=None, title: str | None = None) -> Path | None:
     """Error against warm time, log-log: every point labelled, the Pareto front joined, the
-    reference's noise floor as a dashed line and the path tracer's own curve."""
+    reference's noise floor as a dashed line and the path tracer's own curve.
+
+    Args:
+        result: :func:`tradeoff`'s result.
+        path: PNG to write (a figure of its own), or ``None`` with ``ax``.
+        ax: a Matplotlib axes to draw into instead (a panel of a larger figure).
+        title: the axes' title (default: the scene's file name).
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(7.5, 5.0))
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot(1, 1, 1)
+    fig = None
+    if ax is None:
+        fig = Figure(figsize=(7.5, 5.0))
+        FigureCanvasAgg(fig)
+        ax = fig.add_subplot(1, 1, 1)
     curve = result["path_curve"]
-    ax.plot([p["time_s"] for p in curve], [p["flip"] for p in curve], "o-", color="0.55",
-            label=f"{result['reference_integrator']} (error vs spp)")
+    if curve:
+        ax.plot([p["time_s"] for p in curve], [p["flip"] for p in curve], "o-", color="0.55",
+                label=f"{result['reference_integrator']} (error vs spp)")
     for p in curve:
         ax.annotate(f"{p['spp']}", (p["time_s"], p["flip"]), fontsize=6, color="0.4",
                     xytext=(3, 3), textcoords="offset points")
@@ -479,18 +543,42 @@ def plot(result: dict, path) -> Path:
     for r in ok:
         ax.annotate(r["label"], (r["time_warm_s"], r["flip"]), fontsize=7, xytext=(4, -9),
                     textcoords="offset points")
-    ax.axhline(result["noise_floor_flip"], ls="--", color="C2",
-               label=f"reference noise floor ({result['reference_spp']} spp)")
+    if result["noise_floor_flip"] > 0:  # a deterministic reference (raster) has none
+        ax.axhline(result["noise_floor_flip"], ls="--", color="C2",
+                   label=f"reference noise floor ({result['reference_spp']} spp)")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("warm time per frame (s, build included)")
     ax.set_ylabel("mean FLIP against the reference")
-    ax.set_title(Path(result["scene"]).name, fontsize=10)
+    ax.set_title(title or Path(result["scene"]).name, fontsize=10)
     ax.grid(True, which="both", alpha=0.25)
     ax.legend(fontsize=7, loc="best")
+    if fig is None:
+        return None
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     return Path(path)
+
+
+def table_rows(result: dict) -> list[dict]:
+    """One flat dict per rendered point of a sweep: its knob values, the
+    :data:`CSV_COLUMNS`, ``build_stats`` and its ``inspected`` measurements (for tables of
+    figures)."""
+    return [{**r["point"], **{k: r.get(k) for k in (*CSV_COLUMNS, "build_stats")},
+             **(r.get("inspected") or {})} for r in result["points"] if r["ok"]]
+
+
+def markdown(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
+    """A Markdown table: ``columns`` are ``(header, key, format spec)``; missing values '–'."""
+    def cell(row, key, spec):
+        value = row.get(key)
+        if value is None:
+            return "–"
+        return format(value, spec) if spec else str(value)
+
+    head = "| " + " | ".join(c[0] for c in columns) + " |\n|" + "---|" * len(columns) + "\n"
+    return head + "".join("| " + " | ".join(cell(r, key, spec) for _, key, spec in columns)
+                          + " |\n" for r in rows)
 
 
 def tune(scene_path, flip_budget: float, knobs: list[Knob] | None = None, out_dir=None,
@@ -540,7 +628,8 @@ def _verify(scene_path, point, knobs, params, sweep) -> dict:
     ref = cmp.converge_reference(scene_path, settings["xml_params"],
                                  settings["reference_integrator"],
                                  [chosen["image"], default["image"]],
-                                 sweep.get("target_ratio", 0.2), sweep.get("max_spp", 1024))
+                                 sweep.get("target_ratio", 0.2), sweep.get("max_spp", 1024),
+                                 noise_floor=sweep.get("noise_floor"))
     del ref["scene"]
     flip_chosen, flip_default = ref["flips"]
     return {"verified_flip": flip_chosen, "verified_time_s": chosen["time_warm_s"],

@@ -1,147 +1,139 @@
 """The measured figures of docs/slicing.md (``mi-displace slicing-figures [--quick]``).
 
-* ``slicing_fig10``: the paper's Fig. 10 made numeric — FLIP against the path-traced
-  reference vs slice count for each direction (a, b, c, best, screen) at three view angles
-  (30, 60, 85 degrees from the normal) on the brick plane (scenes/slicing_plane_grazing.xml).
-* ``slicing_tradeoff``: the bricked donut (scenes/slicing_donut.xml): error vs render time
-  for each direction over slice counts (and ``auto``), the path tracer's own error vs spp,
-  relief mapping (steps), VDM, and true displacement (``displaced`` resolution) under raster.
-* ``slicing_depth``: the cup as depth object vs visual hull, and the depth object's error vs
-  slices and vs the view's azimuth relative to the cube faces.
+Every measurement is :func:`mi_displace.evaluate.tradeoff.tradeoff` on a comparison scene
+(the approximation under the scene's ``raster`` at every point, warm time the median of 3
+load + render rounds, FLIP against the scene's path-traced reference with its two-seed
+noise floor):
 
-Approximations render with ``raster`` at one sample per pixel (as a GPU draws them); the
-references with the scenes' ``path`` (direct light) at ``REF_SPP`` samples.  Times are warm
-medians in this process.  Outputs: ``<out>/slicing_*.json`` and ``.png``.
+* ``slicing_fig10``: the paper's Fig. 10 made numeric — direction (a, b, c, best, screen) ×
+  slice count on the brick plane (scenes/slicing_plane_grazing.xml), one sweep per view angle
+  (30, 60, 85 degrees from the normal, the scene's ``elevation``);
+* ``slicing_tradeoff``: the bricked donut (scenes/slicing_donut.xml): one sweep over explicit
+  points — each direction over slice counts (and ``auto``), relief mapping (``relief_steps``),
+  VDM, true displacement (``mode=reference``) at several ``resolution`` under raster — with
+  the path tracer's own error vs spp;
+* ``slicing_depth``: the cup as depth object vs visual hull, one sweep over slices per object
+  and view azimuth, with :func:`geometric_error` (where the first surface lies) per point.
+
+Outputs: ``<out>/slicing_*.json`` (rows and the whole tradeoff results) and ``.png``.
 """
 from __future__ import annotations
 
 import json
 import math
-import statistics
-import time
 from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.evaluate.metrics import flip
+from mi_displace.evaluate import tradeoff as tr
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
+DIRECTIONS = ("a", "b", "c", "best", "screen")
 
 
-def _load(name, **params):
-    dr.sync_thread()
-    start = time.perf_counter()
-    scene = mi.load_file(str(SCENES / name), **{k: str(v) for k, v in params.items()})
-    dr.sync_thread()
-    return scene, time.perf_counter() - start
+def _sweep(name: str, params: dict, reference_spp: int, cache_dir, knobs=None, points=None,
+           path_spps=()) -> dict:
+    """:func:`tradeoff` on ``scenes/<name>`` with a reference of at most ``reference_spp``."""
+    return tr.tradeoff(SCENES / name, knobs, points=points, cache_dir=cache_dir,
+                       params={k: str(v) for k, v in params.items()}, max_spp=reference_spp,
+                       path_spps=list(path_spps))
 
 
-def _render(scene, integrator=None, spp=None, seed=0, repeats=2):
-    """(image, warm render seconds): one cold render, then the median of ``repeats``."""
-    kw = {} if integrator is None else {"integrator": integrator}
-    if spp is not None:
-        kw["spp"] = spp
-    times, img = [], None
-    for i in range(repeats + 1):
-        dr.sync_thread()
-        start = time.perf_counter()
-        img = np.asarray(mi.render(scene, seed=seed, **kw), np.float32)[..., :3]
-        times.append(time.perf_counter() - start)
-    assert np.all(np.isfinite(img)), "non-finite pixels"
-    return img, statistics.median(times[1:]) if repeats else times[0]
+def _shape_stat(row: dict, key: str):
+    """``build_stats[key]`` of the first shape of a point that reports it (else ``None``)."""
+    return next((st[key] for st in row.get("build_stats") or [] if st and key in st), None)
 
 
-def reference(name, spp, **params):
-    scene, _ = _load(name, mode="reference", integrator="path", **params)
-    img, seconds = _render(scene, spp=spp, repeats=0)
-    other, _ = _render(scene, spp=spp, seed=1, repeats=0)
-    return 0.5 * (img + other), flip(img, other)[0], seconds
-
-
-def approximation(name, raster, mode="approximation", **params):
-    scene, build = _load(name, mode=mode, integrator="raster", **params)
-    img, seconds = _render(scene, raster)
-    stats = [getattr(s, "build_stats", {}) for s in scene.shapes()]
-    return img, build, seconds, stats[0] if stats else {}
-
-
-def fig10(out: Path, quick: bool, raster) -> dict:
+def fig10(quick: bool, cache_dir=None) -> dict:
     res = 64 if quick else 128
     counts = (4, 16, 64) if quick else (4, 8, 16, 32, 64, 128)
-    rows = []
+    knobs = [tr.parse_knob(f"direction={','.join(DIRECTIONS)}"),
+             tr.parse_knob(f"slices={','.join(map(str, counts))}")]
+    sweeps = {}
     for theta in (30, 60, 85):
-        elevation = 6 / math.tan(math.radians(theta))
-        ref, floor, _ = reference("slicing_plane_grazing.xml", 64 if quick else 256, res=res,
-                                  elevation=f"{elevation:.4f}")
-        for direction in ("a", "b", "c", "best", "screen"):
-            for n in counts:
-                img, build, seconds, stats = approximation(
-                    "slicing_plane_grazing.xml", raster, res=res, elevation=f"{elevation:.4f}",
-                    slices=n, direction=direction)
-                rows.append({"theta_deg": theta, "direction": direction, "slices": n,
-                             "flip": flip(ref, img)[0], "noise_floor": floor, "render_s": seconds,
-                             "build_s": build, "slice_triangles": stats.get("slice_triangles")})
-                print(f"fig10 theta={theta} {direction} N={n}: FLIP {rows[-1]['flip']:.4f}", flush=True)
-    return {"resolution": res, "rows": rows}
+        elevation = f"{6 / math.tan(math.radians(theta)):.4f}"
+        sweeps[theta] = _sweep("slicing_plane_grazing.xml", {"res": res, "elevation": elevation},
+                               128 if quick else 512, cache_dir, knobs=knobs)
+    return {"resolution": res, "rows": fig10_rows(sweeps), "tradeoff": sweeps}
 
 
-def tradeoff(out: Path, quick: bool, raster) -> dict:
+def fig10_rows(sweeps: dict) -> list[dict]:
+    """The Fig. 10 table from its sweeps (``{view angle: tradeoff result}``)."""
+    return [{"theta_deg": int(theta), "direction": r["direction"], "slices": int(r["slices"]),
+             "flip": r["flip"], "noise_floor": result["noise_floor_flip"],
+             "render_s": r["render_warm_s"], "time_warm_s": r["time_warm_s"],
+             "build_s": r["build_s"], "slice_triangles": _shape_stat(r, "slice_triangles")}
+            for theta, result in sweeps.items() for r in tr.table_rows(result)]
+
+
+def donut_methods(quick: bool) -> list[tuple[str, dict]]:
+    """``(method, point)`` of the donut sweep: slicing per direction and count, ``auto``,
+    relief steps, VDM, true displacement under raster at several tessellations."""
+    counts = (4, 16) if quick else (4, 12, 25, 48)
+    methods = [("slicing " + d, {"direction": d, "slices": n}) for d in DIRECTIONS for n in counts]
+    methods.append(("slicing best auto", {"direction": "best", "slices": "auto"}))
+    methods += [("relief", {"mode": "relief", "relief_steps": n})
+                for n in ((8, 32) if quick else (8, 16, 32, 64))]
+    methods.append(("vdm", {"mode": "vdm"}))
+    methods += [("displaced (raster)", {"mode": "reference", "resolution": n})
+                for n in ((128, 512) if quick else (128, 256, 512, 1024))]
+    return methods
+
+
+def tradeoff(quick: bool, cache_dir=None) -> dict:
     res = 64 if quick else 128
-    name = "slicing_donut.xml"
-    ref, floor, ref_s = reference(name, 128 if quick else 512, res=res, resolution=1536)
+    methods = donut_methods(quick)
+    result = _sweep("slicing_donut.xml", {"res": res}, 256 if quick else 1024, cache_dir,
+                    points=[p for _, p in methods],
+                    path_spps=(1, 8, 32) if quick else (1, 4, 16, 64, 256))
+    return {"resolution": res, "reference_spp": result["reference_spp"],
+            "noise_floor": result["noise_floor_flip"], "reference_s": result["reference_time_s"],
+            "rows": donut_rows(result, methods), "tradeoff": result}
+
+
+def donut_rows(result: dict, methods: list[tuple[str, dict]]) -> list[dict]:
+    """The donut table from its sweep: one row per ``(method, point)`` that rendered, then
+    the path curve."""
+    by_label = {r["label"]: r for r in tr.table_rows(result)}
     rows = []
-
-    def add(method, knob, img, build, seconds, **extra):
-        rows.append({"method": method, "knob": knob, "flip": flip(ref, img)[0],
-                     "build_s": build, "render_s": seconds, **extra})
-        print(f"tradeoff {method} {knob}: FLIP {rows[-1]['flip']:.4f}, {seconds:.3f} s", flush=True)
-
-    for direction in ("a", "b", "c", "best", "screen"):
-        for n in ((4, 16) if quick else (4, 12, 25, 48)):
-            img, build, seconds, stats = approximation(name, raster, res=res, slices=n, direction=direction)
-            add(f"slicing {direction}", n, img, build, seconds, bytes=stats.get("bytes"))
-    img, build, seconds, stats = approximation(name, raster, res=res, slices="auto", direction="best")
-    add("slicing best auto", stats.get("slices"), img, build, seconds, bytes=stats.get("bytes"))
-    for steps in ((8, 32) if quick else (8, 16, 32, 64)):
-        scene, build = _load(name, mode="relief", integrator="raster", res=res)
-        for shape in scene.shapes():
-            bsdf = shape.bsdf()
-            if hasattr(bsdf, "steps"):
-                bsdf.steps = steps
-        img, seconds = _render(scene, raster)
-        add("relief", steps, img, build, seconds)
-    img, build, seconds, stats = approximation(name, raster, mode="vdm", res=res)
-    add("vdm", "default table", img, build, seconds)
-    for resolution in ((128, 512) if quick else (128, 256, 512, 1024)):
-        img, build, seconds, stats = approximation(name, raster, mode="reference", res=res,
-                                                   resolution=resolution)
-        add("displaced (raster)", resolution, img, build, seconds, bytes=stats.get("bytes"))
-    scene, _ = _load(name, mode="reference", integrator="path", res=res, resolution=1536)
-    for spp in ((1, 8, 32) if quick else (1, 4, 16, 64, 256)):
-        img, seconds = _render(scene, spp=spp, seed=7, repeats=1)
-        add("path", spp, img, 0.0, seconds)
-    return {"resolution": res, "reference_spp": 128 if quick else 512, "noise_floor": floor,
-            "reference_s": ref_s, "rows": rows}
+    for method, point in methods:
+        r = by_label.get(tr.point_label(point))
+        if r is None:  # recorded as failed in result["points"]
+            continue
+        knob = (_shape_stat(r, "slices") if point.get("slices") == "auto"
+                else next(iter(v for k, v in point.items() if k != "mode" and k != "direction"),
+                          "default table"))
+        rows.append({"method": method, "knob": knob, "flip": r["flip"], "build_s": r["build_s"],
+                     "render_s": r["render_warm_s"], "time_warm_s": r["time_warm_s"],
+                     "bytes": _shape_stat(r, "bytes")})
+    rows += [{"method": "path", "knob": c["spp"], "flip": c["flip"], "build_s": 0.0,
+              "render_s": c["render_s"], "time_warm_s": c["time_s"], "bytes": None}
+             for c in result["path_curve"]]
+    return rows
 
 
-def depth(out: Path, quick: bool, raster) -> dict:
+def depth(quick: bool, cache_dir=None) -> dict:
     res = 96 if quick else 160
-    rows = []
+    counts = (50, 150) if quick else (25, 75, 150, 300)
+    rows, sweeps = [], {}
     radius, height = 3.8, 2.3
     for azimuth in ((0, 45) if quick else (0, 22.5, 45)):
         a = math.radians(azimuth)
         cam = f"{radius * math.sin(a):.4f}, {-radius * math.cos(a):.4f}, {height}"
         for scene_name in ("slicing_cup_depth.xml", "slicing_cup_hull.xml"):
-            ref, floor, _ = reference(scene_name, 64 if quick else 256, res=res, cam=cam)
-            for n in ((50, 150) if quick else (25, 75, 150, 300)):
-                img, build, seconds, _ = approximation(scene_name, raster, res=res, cam=cam, slices=n)
-                rows.append({"object": "hull" if "hull" in scene_name else "depth", "azimuth_deg": azimuth,
-                             "slices": n, "flip": flip(ref, img)[0], "noise_floor": floor,
-                             "render_s": seconds, **geometric_error(scene_name, cam, res, n)})
-                print(f"depth {rows[-1]['object']} az={azimuth} N={n}: FLIP {rows[-1]['flip']:.4f}", flush=True)
-    return {"resolution": res, "rows": rows}
+            obj = "hull" if "hull" in scene_name else "depth"
+            result = _sweep(scene_name, {"res": res, "cam": cam}, 128 if quick else 512,
+                            cache_dir, knobs=[tr.parse_knob(f"slices={','.join(map(str, counts))}")])
+            sweeps[f"{obj} {azimuth}"] = result
+            for r in tr.table_rows(result):
+                n = int(r["slices"])
+                rows.append({"object": obj, "azimuth_deg": azimuth, "slices": n,
+                             "flip": r["flip"], "noise_floor": result["noise_floor_flip"],
+                             "render_s": r["render_warm_s"], "time_warm_s": r["time_warm_s"],
+                             **geometric_error(scene_name, cam, res, n)})
+    return {"resolution": res, "rows": rows, "tradeoff": sweeps}
 
 
 def geometric_error(scene_name: str, cam: str, res: int, slices: int) -> dict:
@@ -193,22 +185,8 @@ def plot(out: Path, results: dict) -> None:
         ax.legend(fontsize=8)
         fig.tight_layout()
         fig.savefig(out / "slicing_fig10.png", dpi=110)
-    if "tradeoff" in results:
-        rows = results["tradeoff"]["rows"]
-        fig = Figure(figsize=(7, 4.5))
-        FigureCanvasAgg(fig)
-        ax = fig.add_subplot(1, 1, 1)
-        for method in dict.fromkeys(r["method"] for r in rows):
-            pts = [(r["render_s"], r["flip"]) for r in rows if r["method"] == method]
-            ax.plot(*zip(*pts), "*" if "auto" in method else "o-", ms=12 if "auto" in method else 5,
-                    label=method)
-        ax.set_xscale("log")
-        ax.set_xlabel("render time, warm (s)")
-        ax.set_ylabel("FLIP vs path reference")
-        ax.set_title("bricked donut: error vs time")
-        ax.legend(fontsize=7)
-        fig.tight_layout()
-        fig.savefig(out / "slicing_tradeoff.png", dpi=110)
+    if "tradeoff" in results:  # the generic error-vs-time plot with its Pareto front
+        tr.plot(results["tradeoff"]["tradeoff"], out / "slicing_tradeoff.png")
     if "depth" in results:
         rows = results["depth"]["rows"]
         fig = Figure(figsize=(10, 3.6))
@@ -232,20 +210,22 @@ def plot(out: Path, results: dict) -> None:
         fig.savefig(out / "slicing_depth.png", dpi=110)
 
 
-def main(out=Path("docs/figures"), quick: bool = False, which=("fig10", "tradeoff", "depth")) -> dict:
+def main(out=Path("docs/figures"), quick: bool = False, which=("fig10", "tradeoff", "depth"),
+         cache_dir=None) -> dict:
     import mi_displace
+
+    from mi_displace.evaluate.compare import _finite_or_none
 
     mi_displace.init()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    raster = mi.load_dict({"type": "raster", "aa": 1})
     results = {}
     for key, fn in (("fig10", fig10), ("tradeoff", tradeoff), ("depth", depth)):
         if key in which:
-            results[key] = fn(out, quick, raster)
-            (out / f"slicing_{key}.json").write_text(json.dumps(
+            results[key] = fn(quick, cache_dir)
+            (out / f"slicing_{key}.json").write_text(json.dumps(_finite_or_none(
                 {"command": f"mi-displace slicing-figures{' --quick' if quick else ''}",
-                 "variant": mi.variant(), **results[key]}, indent=1))
+                 "variant": mi.variant(), **results[key]}), indent=1))
     plot(out, results)
     return results
 

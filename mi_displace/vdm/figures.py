@@ -1,27 +1,31 @@
 """Figures and trade-off sweeps of the VDM docs (``docs/figures/vdm_*``).
 
-``python -m mi_displace.vdm.figures [--out docs/figures] [--quick]`` writes:
+``python -m mi_displace.vdm.figures [--out docs/figures] [--quick] [--res N]`` writes:
 
 * ``vdm_methods_{torus,spot}.png/.json/.md``: reference | bump | horizon | relief | VDM
-  (raster), FLIP per method inside the masks (:mod:`mi_displace.vdm.methods`);
+  (raster), FLIP per method inside the masks (:func:`mi_displace.vdm.methods.methods_table`,
+  the paper's Table 1 with its shadow / occlusion / silhouette masks);
 * ``vdm_sweep_terms.json``: FLIP against the reference, reconstruction RMSE, compressed
-  size and silhouette mismatch for ``svd_terms`` 1...16 (``mvm_terms`` = min(svd_terms,
-  4)) and for ``mvm_terms`` 1...16 at ``svd_terms`` 8;
+  size and silhouette mismatch for ``svd_terms`` (``mvm_terms`` = min(svd_terms, 4)) and
+  for ``mvm_terms`` at ``svd_terms`` 8;
 * ``vdm_sweep_sizes.json``: the same against table sizes (res, phi, theta, curvatures
-  varied one at a time around the paper's 128, 32, 8, 16), with the build time;
-* ``vdm_sweep.png``: both sweeps plotted;
+  varied one at a time around the paper's 128, 32, 8, 16), with the cold build time;
+* ``vdm_sweep_tradeoff.json`` and ``vdm_sweep.png``: both sweeps are one
+  :func:`mi_displace.evaluate.tradeoff.tradeoff` over explicit points (the table's own
+  errors per point from :func:`table_errors`, its ``inspect``); the plot is tradeoff's
+  error-vs-time panel beside the errors against terms and table size;
 * ``vdm_unseen.json/.md``: the unseen-style scenes (issue 12): every method on
   ``vdm_bricks_grazing`` at 45, 70, 82 and 85 degrees and on ``vdm_corner_normals``.
 
-Every number is measured in this run (raster integrator, torus scene, 256 x 256, 4 x 4
-samples per pixel); nothing is drawn by hand.
+The reference of every number is true displacement under the same raster integrator (256²,
+4 × 4 samples per pixel); nothing is drawn by hand.  The cold build time of a table size is
+a build from scratch only when the VDM table cache (``$MI_DISPLACE_CACHE/vdm``) is empty.
 """
 from __future__ import annotations
 
 import argparse
 import gc
 import json
-import time
 from pathlib import Path
 
 
@@ -85,84 +89,94 @@ def unseen(out: Path, res: int) -> list[dict]:
     return records
 
 
-def _render_flip(scene, reference) -> tuple[float, float]:
-    from mi_displace.evaluate import metrics
-    from mi_displace.render import scene as scenes
+#: ``svd_terms`` (with ``mvm_terms`` = min(k, 4)) and ``mvm_terms`` (with ``svd_terms`` 8)
+SVD_TERMS, MVM_TERMS = (1, 2, 4, 8, 12, 16), (1, 2, 4, 8, 16)
+#: the paper's table sizes (the scene's defaults) and the values varied one at a time
+TABLE_BASE = {"vdm_res": 128, "vdm_phi": 32, "vdm_theta": 8, "vdm_curvatures": 16}
+TABLE_GRID = {"vdm_res": (32, 64, 128), "vdm_phi": (8, 16, 32), "vdm_theta": (4, 8, 16),
+              "vdm_curvatures": (4, 8, 16)}
 
-    scenes.render(scene)  # compile
-    image, seconds = scenes.render(scene)
-    return metrics.flip(reference, image)[0], seconds
 
-
-def sweeps(out: Path, res: int, quick: bool) -> dict:
-    """svd_terms / mvm_terms and table-size sweeps on the torus."""
-    from mi_displace.render import scene as scenes
-
-    path = SCENES["torus"]
-    reference, _ = scenes.render(scenes.load(path, mode="reference", integrator="raster",
-                                             res=res)[0])
-    scene, _ = scenes.load(path, mode="approximation", integrator="raster", res=res)
+def table_errors(scene) -> dict:
+    """The VDM table of the scene's first shape at its term counts (a :func:`tradeoff`
+    ``inspect``): reconstruction RMSE of the VDM [tile units] and MVM [rad], compressed and
+    full table size [MB], fraction of silhouette decisions the compression flips."""
     bsdf = scene.shapes()[0].bsdf()
-    terms = []
-    ks = [1, 2, 4, 8, 16] if quick else list(range(1, 17))
-    for k in ks:
-        for svd, mvm in ((k, min(k, 4)), (8, k)):
-            bsdf.rebuild(svd_terms=svd, mvm_terms=mvm)
-            flip, seconds = _render_flip(scene, reference)
-            rv, rm = bsdf.data.reconstruction_rmse(svd, mvm)
-            terms.append({"svd_terms": svd, "mvm_terms": mvm, "flip": flip, "render_s": seconds,
-                          "rmse_vdm": rv, "rmse_mvm": rm,
-                          "compressed_mb": bsdf.data.compressed.nbytes(svd, mvm) / 1e6,
-                          "silhouette_mismatch": bsdf.data.silhouette_mismatch(mvm)})
-            gc.collect()
-    sizes = []
-    base = {"res": 128, "phi": 32, "theta": 8, "curvatures": 16}
-    grid = {"res": [32, 64, 128], "phi": [8, 16, 32], "theta": [4, 8, 16],
-            "curvatures": [4, 8, 16]}
-    if quick:
-        grid = {"res": [32, 128], "phi": [8], "theta": [4], "curvatures": [4]}
-    for key, values in grid.items():
-        for v in values:
-            cfg = dict(base, **{key: v})
-            start = time.perf_counter()
-            bsdf.rebuild(svd_terms=8, mvm_terms=4, use_cache=False, **cfg)
-            build_s = time.perf_counter() - start
-            flip, seconds = _render_flip(scene, reference)
-            sizes.append(dict(cfg, varied=key, flip=flip, render_s=seconds, build_s=build_s,
-                              table_mb=bsdf.data.table_bytes() / 1e6,
-                              compressed_mb=bsdf.data.compressed.nbytes(8, 4) / 1e6,
-                              rmse_vdm=bsdf.data.reconstruction_rmse(8, 4)[0],
-                              silhouette_mismatch=bsdf.data.silhouette_mismatch(4)))
-            gc.collect()
-    _save_json(out / "vdm_sweep_terms.json", terms)
-    _save_json(out / "vdm_sweep_sizes.json", sizes)
-    _plot_sweeps(out, terms, sizes)
-    return {"terms": terms, "sizes": sizes}
+    data, svd, mvm = bsdf.data, bsdf.svd_terms, bsdf.mvm_terms
+    rmse_vdm, rmse_mvm = data.reconstruction_rmse(svd, mvm)
+    return {"rmse_vdm": rmse_vdm, "rmse_mvm": rmse_mvm,
+            "compressed_mb": data.compressed.nbytes(svd, mvm) / 1e6,
+            "table_mb": data.table_bytes() / 1e6,
+            "silhouette_mismatch": data.silhouette_mismatch(mvm)}
 
 
-def _plot_sweeps(out: Path, terms: list[dict], sizes: list[dict]) -> None:
+def sweep_points(quick: bool) -> tuple[list[dict], list[tuple[str, int, dict]]]:
+    """The term points, and ``(size, value, point)`` for every table size varied one at a
+    time (the paper's sizes at 8 + 4 terms being the shared point
+    ``{"svd_terms": 8, "mvm_terms": 4}``)."""
+    svd, mvm = ((1, 4, 8), (1, 4, 8)) if quick else (SVD_TERMS, MVM_TERMS)
+    terms = [{"svd_terms": k, "mvm_terms": min(k, 4)} for k in svd]
+    terms += [p for p in ({"svd_terms": 8, "mvm_terms": k} for k in mvm) if p not in terms]
+    grid = {"vdm_res": (32, 128), "vdm_theta": (4, 8)} if quick else TABLE_GRID
+    base = {"svd_terms": 8, "mvm_terms": 4}
+    sizes = [(key, v, base if v == TABLE_BASE[key] else {key: v})
+             for key, values in grid.items() for v in values]
+    return terms, sizes
+
+
+def sweeps(out: Path, res: int, quick: bool, cache_dir=None) -> dict:
+    """svd_terms / mvm_terms and table-size sweeps on the torus: one :func:`tradeoff` over
+    explicit points, the reference being true displacement under the same ``raster``
+    (deterministic: no noise floor, no path curve); :func:`table_errors` per point."""
+    from mi_displace.evaluate import tradeoff as tr
+
+    terms, sizes = sweep_points(quick)
+    points = terms + [p for _, _, p in sizes if p not in terms]
+    result = tr.tradeoff(SCENES["torus"], None, points=points, cache_dir=cache_dir,
+                         params={"res": str(res), "reference_integrator": "raster"},
+                         max_spp=2, path_spps=[], inspect=table_errors)
+    rows = {r["label"]: r for r in tr.table_rows(result)}
+
+    def row(point, **extra):
+        r = rows[tr.point_label(point)]
+        return {**{k: r[k] for k in ("flip", "time_warm_s", "render_warm_s", "build_s",
+                                     "build_cold_s", "rmse_vdm", "rmse_mvm", "compressed_mb",
+                                     "table_mb", "silhouette_mismatch")}, **extra}
+
+    term_rows = [row(p, svd_terms=p["svd_terms"], mvm_terms=p["mvm_terms"]) for p in terms]
+    size_rows = [row(p, **{**TABLE_BASE, key: v}, varied=key) for key, v, p in sizes]
+    _save_json(out / "vdm_sweep_terms.json", term_rows)
+    _save_json(out / "vdm_sweep_sizes.json", size_rows)
+    _save_json(out / "vdm_sweep_tradeoff.json", result)
+    _plot_sweeps(out, result, term_rows, size_rows)
+    return {"terms": term_rows, "sizes": size_rows, "tradeoff": result}
+
+
+def _plot_sweeps(out: Path, result: dict, terms: list[dict], sizes: list[dict]) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(11, 3.6))
-    ax = fig.add_subplot(1, 3, 1)
-    a = [t for t in terms if t["mvm_terms"] == min(t["svd_terms"], 4)]
-    b = [t for t in terms if t["svd_terms"] == 8]
-    ax.plot([t["svd_terms"] for t in a], [t["flip"] for t in a], "o-", label="svd_terms (mvm = min(k, 4))")
-    ax.plot([t["mvm_terms"] for t in b], [t["flip"] for t in b], "s--", label="mvm_terms (svd = 8)")
-    ax.set_xlabel("terms")
-    ax.set_ylabel("FLIP vs true displacement")
-    ax.legend(fontsize=7)
+    from mi_displace.evaluate import tradeoff as tr
+
+    fig = Figure(figsize=(15, 4.2))
+    FigureCanvasAgg(fig)
+    tr.plot(result, ax=fig.add_subplot(1, 3, 1), title="VDM on the torus: error vs time")
     ax = fig.add_subplot(1, 3, 2)
-    ax.semilogy([t["svd_terms"] for t in a], [t["rmse_vdm"] for t in a], "o-", label="VDM RMSE [tile]")
-    ax.semilogy([t["mvm_terms"] for t in b], [t["rmse_mvm"] for t in b], "s--", label="MVM RMSE [rad]")
+    a = [t for t in terms if t["mvm_terms"] == min(t["svd_terms"], 4)]
+    b = sorted((t for t in terms if t["svd_terms"] == 8), key=lambda t: t["mvm_terms"])
+    ax.plot([t["svd_terms"] for t in a], [t["flip"] for t in a], "o-", label="FLIP, svd_terms (mvm = min(k, 4))")
+    ax.plot([t["mvm_terms"] for t in b], [t["flip"] for t in b], "s--", label="FLIP, mvm_terms (svd = 8)")
+    ax.semilogy([t["svd_terms"] for t in a], [t["rmse_vdm"] for t in a], "o:", label="VDM RMSE [tile]")
+    ax.semilogy([t["mvm_terms"] for t in b], [t["rmse_mvm"] for t in b], "s:", label="MVM RMSE [rad]")
     ax.semilogy([t["mvm_terms"] for t in b], [max(t["silhouette_mismatch"], 1e-6) for t in b], "^:",
                 label="silhouette mismatch")
     ax.set_xlabel("terms")
     ax.legend(fontsize=7)
     ax = fig.add_subplot(1, 3, 3)
-    for key in ("res", "phi", "theta", "curvatures"):
+    for key in TABLE_GRID:
         rows = [s for s in sizes if s["varied"] == key]
-        ax.plot([s["table_mb"] for s in rows], [s["flip"] for s in rows], "o-", label=key)
+        if rows:
+            ax.plot([s["table_mb"] for s in rows], [s["flip"] for s in rows], "o-", label=key)
         for s in rows:
             ax.annotate(str(s[key]), (s["table_mb"], s["flip"]), fontsize=6)
     ax.set_xscale("log")

@@ -36,7 +36,8 @@ CLAIMS = {"bump": "-/-/-", "horizon": "X/-/-", "relief": "X/X/-", "approximation
 MODE_PARAMS = {"resolution": ("reference",),
                "coarse": ("approximation", "bump", "horizon", "relief", "base"),
                "vdm_res": ("approximation",), "svd_terms": ("approximation",),
-               "mvm_terms": ("approximation",)}
+               "mvm_terms": ("approximation",), "vdm_phi": ("approximation",),
+               "vdm_theta": ("approximation",), "vdm_curvatures": ("approximation",)}
 
 
 def params_for(mode: str, params: dict | None) -> dict:

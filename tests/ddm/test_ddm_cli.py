@@ -13,8 +13,11 @@ def test_ddm_animate_writes_frames(variant_llvm, tmp_path):
     rc = cli.main(["ddm-animate", str(SCENES / "ddm_teapot_morph.xml"), "--shape", "morph",
                    "-D", "mode=approximation", "-D", "integrator=raster", "-D", "res=24",
                    "--frames", "2", "--duration", "0.5", "--out", str(tmp_path)])
-    assert rc == 0 and sorted(p.name for p in tmp_path.iterdir()) == ["frame_0000.png",
-                                                                      "frame_0001.png"]
+    assert rc == 0 and sorted(p.name for p in tmp_path.iterdir()) == [
+        "frame_0000.png", "frame_0001.png", "frames.json"]
+    # an alias of the generic animate: ID.time over [0, duration)
+    edits = [f["edits"] for f in json.loads((tmp_path / "frames.json").read_text())["frames"]]
+    assert edits == [{"morph.time": 0.0}, {"morph.time": 0.25}]
 
 
 def test_ddm_animate_bad_shape_id(variant_llvm, tmp_path, capsys):

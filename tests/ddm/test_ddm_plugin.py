@@ -64,18 +64,21 @@ def test_traverse_time_and_height_remap_in_place(variant):
         params.update()
 
 
-def test_render_frames_writes_one_image_per_time(variant, tmp_path):
+def test_animate_time_writes_one_image_per_time(variant, tmp_path):
+    """``ddm-animate`` is the generic ``animate`` of ``ID.time``: the tiles move per frame."""
     from mi_displace.core.io import read_png
-    from mi_displace.ddm.animation import frame_times, render_frames
+    from mi_displace.evaluate.frames import animate
 
-    scene = mi.load_file(str(SCENES / "ddm_teapot_morph.xml"), mode="approximation",
-                         integrator="raster", res="32")
-    paths = render_frames(scene, "morph", frame_times(3, 1.5), tmp_path)
-    imgs = [read_png(p) for p in paths]
+    params = {"mode": "approximation", "integrator": "raster", "res": "32"}
+    r = animate(SCENES / "ddm_teapot_morph.xml", [("morph.time", 0.0, 1.5)], 3, tmp_path,
+                params=params)
+    imgs = [read_png(p) for p in r["frames"]]
+    assert [e["morph.time"] for e in r["edits"]] == pytest.approx([0.0, 0.5, 1.0])
     assert len(imgs) == 3 and all(i.shape == (32, 32, 3) and i.mean() > 0 for i in imgs)
     assert np.abs(imgs[0] - imgs[2]).mean() > 1e-3      # the tiles moved / morphed
-    with pytest.raises(ValueError, match="no ddm shape"):
-        render_frames(scene, "nope", [0.0], tmp_path)
+    with pytest.raises(ValueError, match="nope.time"):
+        animate(SCENES / "ddm_teapot_morph.xml", [("nope.time", 0.0, 1.0)], 1, tmp_path,
+                params=params)
 
 
 @pytest.mark.parametrize("kw, match", [

@@ -46,9 +46,10 @@ def test_sweep_measures_every_point(sweep):
     assert flips[0] > flips[1] > flips[2]
     # the reference resolves the best point, or says it was capped
     assert result["noise_floor_flip"] <= 0.2 * min(flips) or result["spp_capped"]
-    # the path curve: spp 1, 2, 4, ... up to max_spp / 4, error falling overall
+    # the path curve: spp 1, 2, 4, ... up to a quarter of the reference's, error falling
     curve = result["path_curve"]
-    assert [c["spp"] for c in curve] == [1, 2, 4, 8, 16, 32]
+    assert [c["spp"] for c in curve] == [2 ** k for k in range(
+        int(math.log2(result["reference_spp"] // 4)) + 1)]
     assert curve[-1]["flip"] < curve[0]["flip"]
     out = root / "out"
     saved = json.loads((out / "tradeoff.json").read_text())
@@ -91,6 +92,40 @@ def test_cache_resumes_and_ignores_other_code(sweep, monkeypatch):
     assert not other["points"][0]["cached"]
 
 
+def vertex_count(scene) -> dict:
+    """Vertices of the displaced approximation mesh (a per-point ``inspect`` measurement)."""
+    import mitsuba as mi
+
+    return {"vertices": int(mi.traverse(scene)["ball.vertex_positions"].shape[0] // 3)}
+
+
+def test_explicit_points_inspect_and_noise_floor_target(sweep, tmp_path):
+    """One parameter at a time (points naming different knobs), a per-point measurement of
+    the loaded scene, and a reference that stops at an absolute noise-floor target."""
+    result, root = sweep
+    target = 0.06
+    points = [{"resolution": 6}, {"resolution": 24}, {"resolution": 24, "ball.scale": 0}]
+    r = tr.tradeoff(SCENE, None, points=points, out_dir=tmp_path, cache_dir=root / "cache",
+                    inspect=vertex_count, noise_floor=target, **SWEEP)
+    assert [p["label"] for p in r["points"]] == ["resolution=6", "resolution=24",
+                                                 "resolution=24,ball.scale=0"]
+    counts = [p["inspected"]["vertices"] for p in r["points"]]
+    assert counts[0] < counts[1] == counts[2]    # a finer tessellation, the same one
+    assert r["points"][2]["flip"] > r["points"][1]["flip"]  # undisplaced is further off
+    # the reference doubled exactly until its floor met the target (or the ratio rule)
+    rounds, best = r["reference_rounds"], min(p["flip"] for p in r["points"])
+    assert all(x["noise_floor_flip"] > max(target, 0.2 * best) for x in rounds[:-1])
+    assert rounds[-1]["noise_floor_flip"] <= max(target, 0.2 * best) or r["spp_capped"]
+    assert r["noise_floor_target"] == target
+    header = (tmp_path / "tradeoff.csv").read_text().splitlines()[0]
+    assert header.endswith(",vertices")
+    with pytest.raises(ValueError, match="points"):
+        tr.tradeoff(SCENE, [tr.parse_knob("resolution=6")], points=[{"resolutio": 6}],
+                    cache_dir=tmp_path)
+    with pytest.raises(ValueError, match="noise-floor"):
+        tr.tradeoff(SCENE, [tr.parse_knob("resolution=6")], noise_floor=0, cache_dir=tmp_path)
+
+
 def test_invalid_value_is_skipped_and_recorded(variant_llvm, tmp_path):
     result = tr.tradeoff(SCENE, [tr.parse_knob("resolution=0,12")], cache_dir=tmp_path, **SWEEP)
     bad, good = result["points"]
@@ -108,6 +143,8 @@ def test_unknown_knob_refused_before_rendering(variant_llvm, monkeypatch, tmp_pa
         tr.tradeoff(SCENE, [tr.parse_knob("resolutio=1,2")], cache_dir=tmp_path)
     with pytest.raises(ValueError, match="bal.scale"):
         tr.tradeoff(SCENE, [tr.parse_knob("bal.scale=0.1")], cache_dir=tmp_path)
+    with pytest.raises(ValueError, match="resolutio"):  # an explicit point's knob too
+        tr.tradeoff(SCENE, None, points=[{"resolution": 8}, {"resolutio": 8}], cache_dir=tmp_path)
     for text in ("resolution", "resolution=", "=1,2", "resolution=1,1", "a b=1"):
         with pytest.raises(ValueError, match="--knob"):
             tr.parse_knob(text)
