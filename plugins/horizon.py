@@ -54,8 +54,10 @@ class Horizon(MesostructureBSDF):
         self.stats.update(build_time_s=time.perf_counter() - start, table_bytes=self.lookup.nbytes,
                           tile_size=self.used_tile)
 
+    def _ready(self) -> bool:
+        return self.lookup is not None
+
     def _prepare(self, si, active):
-        self._require(self.lookup is not None)
         frame = TileFrame(si, self.tiling)
         T = mi.Point2f(si.uv.x * self.tiling[0], si.uv.y * self.tiling[1])
         _, grad = self.tiled(T)

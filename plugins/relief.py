@@ -47,8 +47,10 @@ class Relief(MesostructureBSDF):
         self._check_periodic(table.sample_heights(self.height, 64, self.tiling))
         self.stats.update(tile_size=self.used_tile, table_bytes=0)
 
+    def _ready(self) -> bool:
+        return self.used_tile is not None
+
     def _prepare(self, si, active):
-        self._require(self.used_tile is not None)
         D = self.depth / self.used_tile
         frame = TileFrame(si, self.tiling)
         ct, _, _, step = frame.direction(si.to_world(si.wi))

@@ -29,6 +29,7 @@ use on any shape (c_V = 0).  Algorithm: :mod:`mi_displace.vdm`.
 from __future__ import annotations
 
 import math
+import sys
 import warnings
 
 import drjit as dr
@@ -109,6 +110,19 @@ def _round_out(x: float, direction, digits: int = 4) -> float:
         return x
     step = 10.0 ** (math.floor(math.log10(abs(x))) - digits + 1)
     return direction(x / step) * step
+
+def _rendering(bsdf: mi.BSDF) -> bool:
+    """Whether the scene being rendered holds ``bsdf``: the innermost ``mi.Scene`` among the
+    locals of the calling Python frames (``mi.render``'s, an integrator's ``render`` or
+    ``sample``) traverses to it; True when no frame holds a scene."""
+    frame = sys._getframe(1)
+    while frame is not None:
+        scenes = [v for v in frame.f_locals.values() if isinstance(v, mi.Scene)]
+        if scenes:
+            return any(bsdf in mi.traverse(scene).hierarchy for scene in scenes)
+        frame = frame.f_back
+    return True
+
 
 class MesostructureBSDF(mi.BSDF):
     """Base of the per-pixel mesostructure BSDFs: flags, nested BSDF plumbing.
@@ -197,6 +211,32 @@ class MesostructureBSDF(mi.BSDF):
                 "<shape type=\"vdm_mesh\"> (tile size and curvature measured there) or give "
                 "'tile_size' [world units of one texture tile]")
 
+    def _ready(self) -> bool:
+        """Whether the precomputation is done (subclasses that set up late)."""
+        return True
+
+    def _unused(self) -> bool:
+        """True for a BSDF that is not set up and not in the scene being rendered.
+
+        Dr.Jit traces every live BSDF into each vectorised call, also those of other scenes
+        still alive (kept by a reference cycle or a notebook's last traceback); such a BSDF
+        traces as its nested material there (no lane reaches it).  Raises the "not set up"
+        error when the scene being rendered holds it (or no scene is found)."""
+        if self._ready():
+            return False
+        self._require(not _rendering(self))
+        return True
+
+    def _state(self, si, active):
+        """``_prepare(si, active)``; for an unused BSDF (``_unused``) the nested material's
+        own interaction, nothing blocked, and state ``None`` (lit everywhere)."""
+        if self._unused():
+            return None, dr.zeros(mi.Bool, dr.width(si.t)), si
+        return self._prepare(si, active)
+
+    def _lit_state(self, state, wo_world) -> mi.Bool:
+        return mi.Bool(True) if state is None else self._lit(state, wo_world)
+
     # -- to implement --------------------------------------------------------------------
     def _setup(self, tile_size: float, meshes) -> None:
         raise NotImplementedError
@@ -214,17 +254,17 @@ class MesostructureBSDF(mi.BSDF):
 
     def _blocked(self, si, active) -> mi.Bool:
         """Where the ray passes through (only for HAS_SILHOUETTE techniques)."""
-        return active & self._prepare(si, active)[1]
+        return active & self._state(si, active)[1]
 
     # -- mi.BSDF -------------------------------------------------------------------------
     def _eval_radiance(self, ctx, si, wo, active):
         """f cos(theta_o) with the view along si.wi and the light along wo (radiance)."""
         active = mi.Bool(active) & self._facing(si.wi)
-        state, blocked, si2 = self._prepare(si, active)
+        state, blocked, si2 = self._state(si, active)
         wo_world = si.to_world(wo)
         ok = active & ~blocked & self._facing(wo)
         f = self.nested.eval(ctx, si2, si2.to_local(wo_world), ok)
-        ok &= self._lit(state, wo_world)
+        ok &= self._lit_state(state, wo_world)
         return dr.select(ok, mi.Spectrum(f), 0.0)
 
     def eval(self, ctx, si, wo, active=True):
@@ -244,30 +284,30 @@ class MesostructureBSDF(mi.BSDF):
 
     def pdf(self, ctx, si, wo, active=True):
         active = mi.Bool(active) & self._facing(si.wi)
-        _, blocked, si2 = self._prepare(si, active)
+        _, blocked, si2 = self._state(si, active)
         ok = active & ~blocked
         return dr.select(ok, self.nested.pdf(ctx, si2, si2.to_local(si.to_world(wo)), ok), 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
         active = mi.Bool(active) & self._facing(si.wi)
-        state, blocked, si2 = self._prepare(si, active)
+        state, blocked, si2 = self._state(si, active)
         wo_world = si.to_world(wo)
         ok = active & ~blocked
         f, pdf = self.nested.eval_pdf(ctx, si2, si2.to_local(wo_world), ok)
         pdf = dr.select(ok, pdf, 0.0)
         if ctx.mode == mi.TransportMode.Importance:
             return self.eval(ctx, si, wo, active), pdf
-        lit = ok & self._facing(wo) & self._lit(state, wo_world)
+        lit = ok & self._facing(wo) & self._lit_state(state, wo_world)
         return dr.select(lit, mi.Spectrum(f), 0.0), pdf
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         active = mi.Bool(active)
-        state, blocked, si2 = self._prepare(si, active)
+        state, blocked, si2 = self._state(si, active)
         front = active & ~blocked & self._facing(si.wi)
         bs, weight = self.nested.sample(ctx, si2, sample1, sample2, front)
         wo_world = si2.to_world(bs.wo)
         wo = si.to_local(wo_world)
-        keep = front & self._facing(wo) & self._lit(state, wo_world)
+        keep = front & self._facing(wo) & self._lit_state(state, wo_world)
         weight = dr.select(keep, mi.Spectrum(weight), 0.0)
         if ctx.mode == mi.TransportMode.Importance:
             # sampled in the frame seen from wi, weighted by the adjoint value (eval)
@@ -289,7 +329,7 @@ class MesostructureBSDF(mi.BSDF):
 
     def eval_diffuse_reflectance(self, si, active=True):
         active = mi.Bool(active)
-        _, blocked, si2 = self._prepare(si, active)
+        _, blocked, si2 = self._state(si, active)
         albedo = self.nested.eval_diffuse_reflectance(si2, active & ~blocked)
         return dr.select(active & ~blocked, mi.Spectrum(albedo), 0.0)
 
@@ -433,8 +473,10 @@ class VDM(MesostructureBSDF):
         self._require(self.stats.get("tile_size") is not None)
         self._setup(self.stats["tile_size"], self._meshes)
 
+    def _ready(self) -> bool:
+        return self.steps is not None
+
     def _prepare(self, si, active):
-        self._require(self.steps is not None)
         fp = self.steps.footprint(si, active)
         return fp, fp.silhouette, self.steps.shading(si, fp)
 
@@ -442,7 +484,8 @@ class VDM(MesostructureBSDF):
         return self.steps.lit(state, wo_world)
 
     def _blocked(self, si, active):
-        self._require(self.steps is not None)
+        if self._unused():
+            return dr.zeros(mi.Bool, dr.width(si.t))
         return self.steps.silhouette(si, active)
 
     def to_string(self):
