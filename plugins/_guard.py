@@ -44,6 +44,24 @@ def check_finite_floats(plugin: str, props: mi.Properties) -> None:
             raise ValueError(f"{plugin}: parameter {key!r} must be finite, got {value}")
 
 
+_TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
+
+
+def boolean(plugin: str, props: mi.Properties, name: str, default: bool) -> bool:
+    """Property ``name`` as a bool: a ``<boolean>``, 0 / 1, or a string true/false (yes/no,
+    on/off, 1/0, any case; ``bool("false")`` would be True), else a ``ValueError`` naming
+    ``plugin`` and the property."""
+    value = props.get(name, default)
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, (int, float)) and value in (0, 1):
+        return bool(value)
+    if isinstance(value, str) and value.strip().lower() in _TRUE + _FALSE:
+        return value.strip().lower() in _TRUE
+    raise ValueError(f"{plugin}: parameter {name!r} must be a boolean (true or false), "
+                     f"got {value!r}")
+
+
 def _named_in_traceback(error: Exception, keys: list[str]) -> str | None:
     """The key of ``keys`` that the failing code names, innermost frame first: as a string
     literal in the failing line, or as the value of one of the frame's local variables."""

@@ -39,21 +39,23 @@ import numpy as np
 from mi_displace.core.texture_height import check_texture_finite
 from mi_displace.vdm import auto, build, table
 from mi_displace.vdm.lookup import cached_lookup
-from mi_displace.plugins._guard import constructor
+from mi_displace.plugins._guard import boolean, constructor
 from mi_displace.vdm.steps import VDMSteps, placement_scale
 
 
-def _number(props, name, default, low=None, high=None, integer=False):
+def _number(plugin, props, name, default, low=None, high=None, integer=False):
+    """Property ``name`` as a finite number in [low, high] (an int with ``integer``), else a
+    ValueError naming ``plugin`` and the property."""
     value = props.get(name, default)
     try:
         x = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"vdm: '{name}' must be a number, got {value!r}") from None
+        raise ValueError(f"{plugin}: '{name}' must be a number, got {value!r}") from None
     if not math.isfinite(x) or (low is not None and x < low) or (high is not None and x > high):
-        raise ValueError(f"vdm: '{name}' must be finite and in [{low}, {high}], got {value!r}")
+        raise ValueError(f"{plugin}: '{name}' must be finite and in [{low}, {high}], got {value!r}")
     if integer:
         if x != int(x):
-            raise ValueError(f"vdm: '{name}' must be an integer, got {value!r}")
+            raise ValueError(f"{plugin}: '{name}' must be an integer, got {value!r}")
         return int(x)
     return x
 
@@ -95,11 +97,11 @@ def parse_mesostructure(props: mi.Properties, plugin: str):
         raise ValueError(f"{plugin}: 'depth' must be finite and >= 0 (world units below the "
                          f"reference surface), got {depth!r}")
     tiling = props.get("tiling", None)
-    tu = _number(props, "tiling_u", 1.0 if tiling is None else tiling, 1e-6)
-    tv = _number(props, "tiling_v", 1.0 if tiling is None else tiling, 1e-6)
+    tu = _number(plugin, props, "tiling_u", 1.0 if tiling is None else tiling, 1e-6)
+    tv = _number(plugin, props, "tiling_v", 1.0 if tiling is None else tiling, 1e-6)
     tile_size = props.get("tile_size", None)
     if tile_size is not None:
-        tile_size = _number(props, "tile_size", tile_size, 1e-9)
+        tile_size = _number(plugin, props, "tile_size", tile_size, 1e-9)
     return dict(nested=nested, height=height, depth=depth, tiling=(tu, tv), tile_size=tile_size)
 
 
@@ -355,27 +357,27 @@ class VDM(MesostructureBSDF):
                              "size of one tile: give the sensor (<ref name=\"sensor\" "
                              "id=\"...\"/>)")
         self.spec = build.VDMSpec(
-            res=128 if "res" in self.auto else _number(props, "res", 128, 1, 1024, True),
-            n_theta=8 if "theta" in self.auto else _number(props, "theta", 8, 2, 64, True),
-            n_phi=_number(props, "phi", 32, 4, 256, True),
-            n_curv=_number(props, "curvatures", 16, 1, 64, True),
-            theta_oversample=_number(props, "theta_oversample", 1, 1, 8, True))
-        self.svd_terms = _number(props, "svd_terms", 8, 1, build.K_STORED, True)
-        self.mvm_terms = _number(props, "mvm_terms", 4, 1, build.K_STORED, True)
-        self.shadows = bool(props.get("shadows", True))
-        self.shadow_bias = _number(props, "shadow_bias", 0.0, 0.0)
-        self.shadow_slack = _number(props, "shadow_slack", 0.0, 0.0)
-        self.shadow_verify = _number(props, "shadow_verify", 3, 0, 64, True)
-        self.refine_steps = _number(props, "refine_steps", 8, 0, 256, True)
-        self.refine_window = _number(props, "refine_window", 0.5, 0.0, 10.0)
-        self.use_cache = bool(props.get("cache", True))
-        self.curvature_percentile = _number(props, "curvature_percentile", 0.0, 0.0, 49.0)
+            res=128 if "res" in self.auto else _number(self.PLUGIN, props, "res", 128, 1, 1024, True),
+            n_theta=8 if "theta" in self.auto else _number(self.PLUGIN, props, "theta", 8, 2, 64, True),
+            n_phi=_number(self.PLUGIN, props, "phi", 32, 4, 256, True),
+            n_curv=_number(self.PLUGIN, props, "curvatures", 16, 1, 64, True),
+            theta_oversample=_number(self.PLUGIN, props, "theta_oversample", 1, 1, 8, True))
+        self.svd_terms = _number(self.PLUGIN, props, "svd_terms", 8, 1, build.K_STORED, True)
+        self.mvm_terms = _number(self.PLUGIN, props, "mvm_terms", 4, 1, build.K_STORED, True)
+        self.shadows = boolean(self.PLUGIN, props, "shadows", True)
+        self.shadow_bias = _number(self.PLUGIN, props, "shadow_bias", 0.0, 0.0)
+        self.shadow_slack = _number(self.PLUGIN, props, "shadow_slack", 0.0, 0.0)
+        self.shadow_verify = _number(self.PLUGIN, props, "shadow_verify", 3, 0, 64, True)
+        self.refine_steps = _number(self.PLUGIN, props, "refine_steps", 8, 0, 256, True)
+        self.refine_window = _number(self.PLUGIN, props, "refine_window", 0.5, 0.0, 10.0)
+        self.use_cache = boolean(self.PLUGIN, props, "cache", True)
+        self.curvature_percentile = _number(self.PLUGIN, props, "curvature_percentile", 0.0, 0.0, 49.0)
         c_min, c_max = props.get("curvature_min", None), props.get("curvature_max", None)
         self.fixed_range = None
         if (c_min is None) != (c_max is None):
             raise ValueError("vdm: give both 'curvature_min' and 'curvature_max' or neither")
         if c_min is not None:
-            lo, hi = _number(props, "curvature_min", c_min), _number(props, "curvature_max", c_max)
+            lo, hi = _number(self.PLUGIN, props, "curvature_min", c_min), _number(self.PLUGIN, props, "curvature_max", c_max)
             if lo > hi:
                 raise ValueError(f"vdm: 'curvature_min' ({lo}) > 'curvature_max' ({hi})")
             self.fixed_range = (lo, hi)
@@ -439,7 +441,7 @@ class VDM(MesostructureBSDF):
                     f"vdm: '{name}' = {k} exceeds the {stored} eigen-functions this table keeps "
                     f"({len(spec.curvatures())} curvature(s) x ({spec.n_theta} theta + 1) "
                     f"columns, at most {build.K_STORED}); lower it or raise 'theta'")
-        heights = table.sample_heights(self.height, spec.res, self.tiling)
+        heights = table.sample_heights(self.height, spec.res, self.tiling, self.PLUGIN)
         self._check_periodic(heights)
         self.data = build.build(heights, spec, use_cache=self.use_cache)
         lookup = cached_lookup(self.data, self.svd_terms, self.mvm_terms)
