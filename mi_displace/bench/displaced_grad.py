@@ -9,13 +9,14 @@
 """
 from __future__ import annotations
 
-import json as _json
 import resource
 import statistics
 import time
 
 import drjit as dr
 import mitsuba as mi
+
+from mi_displace.bench._timing import print_record
 
 
 def _scene() -> mi.Scene:
@@ -75,10 +76,5 @@ def run() -> dict:
 
 
 def main(json: bool = False) -> int:
-    result = run()
-    if json:
-        print(_json.dumps(result, indent=2))
-    else:
-        for key, value in result.items():
-            print(f"{key}: {value}")
+    print_record(run(), json, width=0)
     return 0
