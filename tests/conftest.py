@@ -4,7 +4,6 @@ Each test that takes ``variant`` runs once per variant in ``MI_DISPLACE_TEST_VAR
 (comma separated; default ``llvm_ad_rgb,cuda_ad_rgb``) and is skipped where the
 backend is missing.  The fixture sets the variant and registers our plugins.
 """
-import gc
 import os
 
 import drjit as dr
@@ -31,12 +30,3 @@ def variant(request):
 def variant_llvm():
     """The default CPU variant only (tests of CPU-specific behaviour)."""
     return mi_displace.init("llvm_ad_rgb")
-
-
-@pytest.fixture(autouse=True)
-def _release_scenes():
-    """Collect each test's garbage (scenes and plugin objects kept alive by reference cycles,
-    e.g. an exception's traceback) before the next test: a Python plugin object that outlives
-    its scene can otherwise still be found by a later scene's vectorised calls."""
-    yield
-    gc.collect()
