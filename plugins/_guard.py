@@ -18,6 +18,8 @@ terminal only.  Everything else passes through unchanged (a plugin's own ``Value
 """
 from __future__ import annotations
 
+import functools
+import gc
 import linecache
 import math
 import re
@@ -140,6 +142,29 @@ def constructor(plugin: str, cls: type) -> Callable[[mi.Properties], object]:
             raise ValueError(f"{plugin}: parameter {names} must be {expected}") from None
 
     return make
+
+
+def collector_paused(method):
+    """``method`` run with Python's cyclic garbage collector paused.
+
+    Dr.Jit traces a vectorised call over *every* live instance of its domain (all BSDFs,
+    all textures), holding plain pointers to them.  A Python plugin method called in that
+    trace allocates, which may start the collector, which may free an instance of a dropped
+    scene still waiting in a reference cycle before its turn to be traced: a segfault (seen
+    with tests/vdm/test_vdm_plugin.py then tests/vdm/test_vdm_scene_sequence.py run without
+    a collection between tests).  The plugin methods such a trace calls run with it paused.
+    """
+    @functools.wraps(method)
+    def paused(*args, **kwargs):
+        if not gc.isenabled():
+            return method(*args, **kwargs)
+        gc.disable()
+        try:
+            return method(*args, **kwargs)
+        finally:
+            gc.enable()
+
+    return paused
 
 
 def take_sensors(props: mi.Properties) -> list:

@@ -39,7 +39,7 @@ import numpy as np
 from mi_displace.core.texture_height import check_texture_finite
 from mi_displace.vdm import auto, build, table
 from mi_displace.vdm.lookup import cached_lookup
-from mi_displace.plugins._guard import boolean, constructor
+from mi_displace.plugins._guard import boolean, collector_paused, constructor
 from mi_displace.vdm.steps import VDMSteps, placement_scale
 
 
@@ -269,6 +269,7 @@ class MesostructureBSDF(mi.BSDF):
         ok &= self._lit_state(state, wo_world)
         return dr.select(ok, mi.Spectrum(f), 0.0)
 
+    @collector_paused
     def eval(self, ctx, si, wo, active=True):
         if ctx.mode != mi.TransportMode.Importance:
             return self._eval_radiance(ctx, si, wo, active)
@@ -284,12 +285,14 @@ class MesostructureBSDF(mi.BSDF):
         correction = dr.abs(dr.dot(wo, ng)) / dr.maximum(dr.abs(dr.dot(si.wi, ng)), 1e-6)
         return f * correction
 
+    @collector_paused
     def pdf(self, ctx, si, wo, active=True):
         active = mi.Bool(active) & self._facing(si.wi)
         _, blocked, si2 = self._state(si, active)
         ok = active & ~blocked
         return dr.select(ok, self.nested.pdf(ctx, si2, si2.to_local(si.to_world(wo)), ok), 0.0)
 
+    @collector_paused
     def eval_pdf(self, ctx, si, wo, active=True):
         active = mi.Bool(active) & self._facing(si.wi)
         state, blocked, si2 = self._state(si, active)
@@ -302,6 +305,7 @@ class MesostructureBSDF(mi.BSDF):
         lit = ok & self._facing(wo) & self._lit_state(state, wo_world)
         return dr.select(lit, mi.Spectrum(f), 0.0), pdf
 
+    @collector_paused
     def sample(self, ctx, si, sample1, sample2, active=True):
         active = mi.Bool(active)
         state, blocked, si2 = self._state(si, active)
@@ -323,12 +327,14 @@ class MesostructureBSDF(mi.BSDF):
         bs.sampled_component = dr.select(passes, mi.UInt32(self.null_index), bs.sampled_component)
         return bs, dr.select(passes, 1.0, weight)
 
+    @collector_paused
     def eval_null_transmission(self, si, active=True):
         active = mi.Bool(active)
         if not self.HAS_SILHOUETTE:
             return dr.zeros(mi.Spectrum, dr.width(si.uv))
         return mi.Spectrum(dr.select(self._blocked(si, active), 1.0, 0.0))
 
+    @collector_paused
     def eval_diffuse_reflectance(self, si, active=True):
         active = mi.Bool(active)
         _, blocked, si2 = self._state(si, active)

@@ -51,7 +51,8 @@ def check_heights(heights: np.ndarray, name: str = "height", plugin: str = "vdm"
     (values within :data:`HEIGHT_TOLERANCE` outside are clipped: filtering overshoot)."""
     heights = np.asarray(heights, dtype=np.float32)
     if heights.ndim != 2 or min(heights.shape) < 1:
-        raise ValueError(f"{plugin}: '{name}' grid must be a non-empty 2-D array, got shape {heights.shape}")
+        raise ValueError(f"{plugin}: '{name}' grid must be a non-empty 2-D array, "
+                         f"got shape {heights.shape}")
     bad = ~np.isfinite(heights)
     if bad.any():
         raise ValueError(f"{plugin}: '{name}' holds {int(bad.sum())} NaN/Inf height value(s); "
@@ -63,7 +64,8 @@ def check_heights(heights: np.ndarray, name: str = "height", plugin: str = "vdm"
     return np.clip(heights, 0.0, 1.0)
 
 
-def sample_heights(texture: mi.Texture, res: int, tiling=(1.0, 1.0), plugin: str = "vdm") -> np.ndarray:
+def sample_heights(texture: mi.Texture, res: int, tiling=(1.0, 1.0),
+                   plugin: str = "vdm") -> np.ndarray:
     """Heights H at the texel centres of one tile, shape (res, res) float32 (row = y).
 
     The texture is evaluated at ``uv = T / tiling`` (its own ``to_uv`` applies), so one tile

@@ -61,3 +61,65 @@ def test_an_unset_bsdf_fails_only_its_own_scene(variant, plugin, integrator):
         assert np.all(np.isfinite(img)) and img.mean() > 0.05
     # ... and the broken scene still says what is wrong with it
     _fails_not_set_up(broken, plugin)
+
+
+def test_plugin_methods_in_a_trace_run_with_the_collector_paused(variant):
+    """Dr.Jit traces every live BSDF and texture into each vectorised call, through plain
+    pointers; Python's collector, started by a plugin method's allocations inside that
+    trace, could free a dropped scene's instance before its turn (a segfault: seen with
+    tests/vdm/test_vdm_plugin.py then this file, without a collection between tests).  A
+    Python BSDF nested in ``vdm`` (called from its traced methods) sees the collector off;
+    it is on again after the render."""
+    import gc
+    import sys
+
+    import drjit as dr
+
+    seen = []
+
+    class Probe(mi.BSDF):
+        def __init__(self, props):
+            super().__init__(props)
+            self.m_flags = int(mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide)
+            self.m_components = [self.m_flags]
+
+        def _note(self):
+            # only the calls from vdm's methods (Dr.Jit also traces the probe directly)
+            if sys._getframe(2).f_globals.get("__name__") == "mi_displace.plugins.vdm":
+                seen.append(gc.isenabled())
+
+        def eval(self, ctx, si, wo, active=True):
+            self._note()
+            return mi.Spectrum(dr.select(wo.z > 0, 0.5 * wo.z / dr.pi, 0.0))
+
+        def pdf(self, ctx, si, wo, active=True):
+            self._note()
+            return dr.select(wo.z > 0, wo.z / dr.pi, 0.0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            self._note()
+            bs = dr.zeros(mi.BSDFSample3f)
+            bs.wo = mi.warp.square_to_cosine_hemisphere(sample2)
+            bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(bs.wo)
+            bs.eta, bs.sampled_type = 1.0, mi.UInt32(int(mi.BSDFFlags.DiffuseReflection))
+            return bs, mi.Spectrum(0.5)
+
+        def eval_diffuse_reflectance(self, si, active=True):
+            self._note()
+            return mi.Spectrum(0.5)
+
+        def to_string(self):
+            return "Probe"
+
+    mi.register_bsdf("gc_probe", lambda props: Probe(props))
+    scene = _scene({"type": "sphere", "bsdf": _bsdf("vdm", tile_size=0.5, svd_terms=4,
+                                                     mvm_terms=2, nested={"type": "gc_probe"})},
+                   "path")
+    assert gc.isenabled()
+    img = np.asarray(mi.render(scene, spp=1))
+    assert np.all(np.isfinite(img)) and img.mean() > 0
+    assert seen and not any(seen), seen
+    assert gc.isenabled()
