@@ -152,7 +152,9 @@ def collector_paused(method):
     trace allocates, which may start the collector, which may free an instance of a dropped
     scene still waiting in a reference cycle before its turn to be traced: a segfault (seen
     with tests/vdm/test_vdm_plugin.py then tests/vdm/test_vdm_scene_sequence.py run without
-    a collection between tests).  The plugin methods such a trace calls run with it paused.
+    a collection between tests).  The plugin methods such a trace calls, and the raster
+    integrator's whole frame (its vectorised calls are launched from Python), run with it
+    paused.  Allocations in Dr.Jit's own code between two instances remain uncovered.
     """
     @functools.wraps(method)
     def paused(*args, **kwargs):

@@ -363,8 +363,8 @@ class VDM(MesostructureBSDF):
                              "size of one tile: give the sensor (<ref name=\"sensor\" "
                              "id=\"...\"/>)")
         self.spec = build.VDMSpec(
-            res=128 if "res" in self.auto else _number(self.PLUGIN, props, "res", 128, 1, 1024, True),
-            n_theta=8 if "theta" in self.auto else _number(self.PLUGIN, props, "theta", 8, 2, 64, True),
+            res=128 if "res" in self.auto else _number("vdm", props, "res", 128, 1, 1024, True),
+            n_theta=8 if "theta" in self.auto else _number("vdm", props, "theta", 8, 2, 64, True),
             n_phi=_number(self.PLUGIN, props, "phi", 32, 4, 256, True),
             n_curv=_number(self.PLUGIN, props, "curvatures", 16, 1, 64, True),
             theta_oversample=_number(self.PLUGIN, props, "theta_oversample", 1, 1, 8, True))
@@ -377,13 +377,15 @@ class VDM(MesostructureBSDF):
         self.refine_steps = _number(self.PLUGIN, props, "refine_steps", 8, 0, 256, True)
         self.refine_window = _number(self.PLUGIN, props, "refine_window", 0.5, 0.0, 10.0)
         self.use_cache = boolean(self.PLUGIN, props, "cache", True)
-        self.curvature_percentile = _number(self.PLUGIN, props, "curvature_percentile", 0.0, 0.0, 49.0)
+        self.curvature_percentile = _number(self.PLUGIN, props, "curvature_percentile",
+                                            0.0, 0.0, 49.0)
         c_min, c_max = props.get("curvature_min", None), props.get("curvature_max", None)
         self.fixed_range = None
         if (c_min is None) != (c_max is None):
             raise ValueError("vdm: give both 'curvature_min' and 'curvature_max' or neither")
         if c_min is not None:
-            lo, hi = _number(self.PLUGIN, props, "curvature_min", c_min), _number(self.PLUGIN, props, "curvature_max", c_max)
+            lo = _number(self.PLUGIN, props, "curvature_min", c_min)
+            hi = _number(self.PLUGIN, props, "curvature_max", c_max)
             if lo > hi:
                 raise ValueError(f"vdm: 'curvature_min' ({lo}) > 'curvature_max' ({hi})")
             self.fixed_range = (lo, hi)

@@ -4,6 +4,7 @@ Each test that takes ``variant`` runs once per variant in ``MI_DISPLACE_TEST_VAR
 (comma separated; default ``llvm_ad_rgb,cuda_ad_rgb``) and is skipped where the
 backend is missing.  The fixture sets the variant and registers our plugins.
 """
+import gc
 import os
 
 import drjit as dr
@@ -30,3 +31,21 @@ def variant(request):
 def variant_llvm():
     """The default CPU variant only (tests of CPU-specific behaviour)."""
     return mi_displace.init("llvm_ad_rgb")
+
+
+@pytest.fixture(autouse=True)
+def _release_scenes():
+    """Collect each test's garbage before the next test.
+
+    The library no longer needs it for its own checks (a BSDF that is not set up fails only
+    its own scene: tests/vdm/test_vdm_scene_sequence.py).  But tests drop scenes inside
+    reference cycles (``pytest.raises`` keeps tracebacks), and Dr.Jit traces every live
+    instance into each vectorised call through plain pointers: Python's collector, started
+    by an allocation inside that trace, can free a dropped scene's instance before its turn
+    (a segfault that depends on test order).  Our plugin methods and the raster integrator
+    pause the collector (plugins/_guard.py ``collector_paused``); allocations in Dr.Jit's
+    and nanobind's own code between instances, under Mitsuba's C++ integrators, cannot be
+    covered from Python, so the suite does not leave garbage for them."""
+    yield
+    gc.collect()
+
