@@ -18,6 +18,8 @@ terminal only.  Everything else passes through unchanged (a plugin's own ``Value
 """
 from __future__ import annotations
 
+import functools
+import gc
 import linecache
 import math
 import re
@@ -42,6 +44,24 @@ def check_finite_floats(plugin: str, props: mi.Properties) -> None:
         props.mark_queried(key, queried)
         if not math.isfinite(value):
             raise ValueError(f"{plugin}: parameter {key!r} must be finite, got {value}")
+
+
+_TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
+
+
+def boolean(plugin: str, props: mi.Properties, name: str, default: bool) -> bool:
+    """Property ``name`` as a bool: a ``<boolean>``, 0 / 1, or a string true/false (yes/no,
+    on/off, 1/0, any case; ``bool("false")`` would be True), else a ``ValueError`` naming
+    ``plugin`` and the property."""
+    value = props.get(name, default)
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, (int, float)) and value in (0, 1):
+        return bool(value)
+    if isinstance(value, str) and value.strip().lower() in _TRUE + _FALSE:
+        return value.strip().lower() in _TRUE
+    raise ValueError(f"{plugin}: parameter {name!r} must be a boolean (true or false), "
+                     f"got {value!r}")
 
 
 def _named_in_traceback(error: Exception, keys: list[str]) -> str | None:
@@ -122,6 +142,31 @@ def constructor(plugin: str, cls: type) -> Callable[[mi.Properties], object]:
             raise ValueError(f"{plugin}: parameter {names} must be {expected}") from None
 
     return make
+
+
+def collector_paused(method):
+    """``method`` run with Python's cyclic garbage collector paused.
+
+    Dr.Jit traces a vectorised call over *every* live instance of its domain (all BSDFs,
+    all textures), holding plain pointers to them.  A Python plugin method called in that
+    trace allocates, which may start the collector, which may free an instance of a dropped
+    scene still waiting in a reference cycle before its turn to be traced: a segfault (seen
+    with tests/vdm/test_vdm_plugin.py then tests/vdm/test_vdm_scene_sequence.py run without
+    a collection between tests).  The plugin methods such a trace calls, and the raster
+    integrator's whole frame (its vectorised calls are launched from Python), run with it
+    paused.  Allocations in Dr.Jit's own code between two instances remain uncovered.
+    """
+    @functools.wraps(method)
+    def paused(*args, **kwargs):
+        if not gc.isenabled():
+            return method(*args, **kwargs)
+        gc.disable()
+        try:
+            return method(*args, **kwargs)
+        finally:
+            gc.enable()
+
+    return paused
 
 
 def take_sensors(props: mi.Properties) -> list:

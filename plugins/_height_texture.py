@@ -24,6 +24,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.core import heightfield as hf
+from mi_displace.plugins._guard import collector_paused
 
 _BASES: dict[str, type] = {}
 
@@ -97,6 +98,7 @@ def _make_base() -> type:
             cb.put("to_uv", self._to_uv, mi.ParamFlags.NonDifferentiable)
 
         # -- evaluation ------------------------------------------------------------------
+        @collector_paused
         def height(self, si: mi.SurfaceInteraction3f) -> tuple[mi.Float, mi.Vector2f]:
             """``(h, dh/d(si.uv))``: the pattern at ``to_uv(si.uv)`` with the chain rule."""
             return hf.evaluate(self.PATTERN, si.uv, self._affine, **self._live)

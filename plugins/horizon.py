@@ -36,9 +36,9 @@ class Horizon(MesostructureBSDF):
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        self.res = _number(props, "res", 128, 1, 2048, True)
-        self.azimuths = _number(props, "azimuths", 16, 4, 256, True)
-        self.max_distance = _number(props, "max_distance", 0.5, 1e-3, 16.0)
+        self.res = _number(self.PLUGIN, props, "res", 128, 1, 2048, True)
+        self.azimuths = _number(self.PLUGIN, props, "azimuths", 16, 4, 256, True)
+        self.max_distance = _number(self.PLUGIN, props, "max_distance", 0.5, 1e-3, 16.0)
         self.lookup = None
         self.tiled = TiledHeight(self.height, self.tiling, 0.25 / self.res)
         if self.tile_size is not None:
@@ -47,15 +47,17 @@ class Horizon(MesostructureBSDF):
     def _setup(self, tile_size, meshes):
         start = time.perf_counter()
         self.used_tile = float(tile_size)
-        heights = table.sample_heights(self.height, self.res, self.tiling)
+        heights = table.sample_heights(self.height, self.res, self.tiling, self.PLUGIN)
         self._check_periodic(heights)
         self.D = self.depth / self.used_tile
         self.lookup = HorizonLookup(horizon_table(heights, self.D, self.azimuths, self.max_distance))
         self.stats.update(build_time_s=time.perf_counter() - start, table_bytes=self.lookup.nbytes,
                           tile_size=self.used_tile)
 
+    def _ready(self) -> bool:
+        return self.lookup is not None
+
     def _prepare(self, si, active):
-        self._require(self.lookup is not None)
         frame = TileFrame(si, self.tiling)
         T = mi.Point2f(si.uv.x * self.tiling[0], si.uv.y * self.tiling[1])
         _, grad = self.tiled(T)

@@ -20,7 +20,7 @@ acceleration structure built (``docs/raster.md``).
 import mitsuba as mi
 
 from mi_displace.render import raster
-from mi_displace.plugins._guard import constructor
+from mi_displace.plugins._guard import collector_paused, constructor
 
 
 class Raster(mi.SamplingIntegrator):
@@ -44,11 +44,13 @@ class Raster(mi.SamplingIntegrator):
         ).check()
         self.shapes = None
 
+    @collector_paused   # the whole frame: its vectorised calls trace every live BSDF
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
         return raster.render(scene, sensor, self.aa, self.max_layers, self.options, self.shapes)
 
+    @collector_paused
     def sample(self, scene, sampler, ray, medium=None, active=True):
         return raster.shade(scene, mi.Ray3f(ray), self.max_layers, active), mi.Bool(active), []
 

@@ -34,9 +34,9 @@ class Relief(MesostructureBSDF):
 
     def __init__(self, props: mi.Properties):
         super().__init__(props)
-        self.steps = _number(props, "steps", 32, 1, 4096, True)
-        self.refine = _number(props, "refine", 6, 0, 32, True)
-        self.shadow_steps = _number(props, "shadow_steps", 16, 0, 4096, True)
+        self.steps = _number(self.PLUGIN, props, "steps", 32, 1, 4096, True)
+        self.refine = _number(self.PLUGIN, props, "refine", 6, 0, 32, True)
+        self.shadow_steps = _number(self.PLUGIN, props, "shadow_steps", 16, 0, 4096, True)
         self.tiled = TiledHeight(self.height, self.tiling, 1e-3)
         self.used_tile = None
         if self.tile_size is not None:
@@ -44,11 +44,13 @@ class Relief(MesostructureBSDF):
 
     def _setup(self, tile_size, meshes):
         self.used_tile = float(tile_size)
-        self._check_periodic(table.sample_heights(self.height, 64, self.tiling))
+        self._check_periodic(table.sample_heights(self.height, 64, self.tiling, self.PLUGIN))
         self.stats.update(tile_size=self.used_tile, table_bytes=0)
 
+    def _ready(self) -> bool:
+        return self.used_tile is not None
+
     def _prepare(self, si, active):
-        self._require(self.used_tile is not None)
         D = self.depth / self.used_tile
         frame = TileFrame(si, self.tiling)
         ct, _, _, step = frame.direction(si.to_world(si.wi))

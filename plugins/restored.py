@@ -37,7 +37,7 @@ from mi_displace.bake import formats
 from mi_displace.bake.levels import auto_levels
 from mi_displace.bake.meshdata import load_mesh
 from mi_displace.bake.restore import edge_splits, low_for_map, restore
-from mi_displace.plugins._guard import constructor, take_sensors
+from mi_displace.plugins._guard import boolean, constructor, take_sensors
 
 
 class Restored(mi.Mesh):
@@ -58,7 +58,7 @@ class Restored(mi.Mesh):
             levels = int(levels)
         self.split = props.get("split", None)
         self.dicing_rate = float(props.get("dicing_rate", 1.0))
-        self.keep_holes = bool(props.get("keep_holes", True))
+        self.keep_holes = boolean("restored", props, "keep_holes", True)
         self.low = load_mesh(low, "low-poly")
         self.map_shape = (int(formats.read_metadata(self.map_path)["height"]),
                           int(formats.read_metadata(self.map_path)["width"]))

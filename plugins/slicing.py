@@ -45,7 +45,7 @@ from mi_displace.plugins.vdm import MesostructureBSDF, nested_objects
 from mi_displace.slicing import geometry as geo
 from mi_displace.slicing.sliced import DIRECTIONS, SlicedVolume
 from mi_displace.vdm.frame import shading_interaction
-from mi_displace.plugins._guard import constructor
+from mi_displace.plugins._guard import boolean, constructor
 
 
 class SlicingBSDF(MesostructureBSDF):
@@ -134,9 +134,9 @@ class Slicing(mi.Mesh):
         if direction not in DIRECTIONS:
             raise ValueError(f"slicing: 'direction' must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
         alpha = str(props.get("alpha", "basic" if direction == "a" else "ramp"))
-        ratio_scaling = bool(props.get("ratio_scaling", True))
-        draw_base = bool(props.get("draw_base", False))
-        self.rasterise = bool(props.get("rasterise", True))
+        ratio_scaling = boolean("slicing", props, "ratio_scaling", True)
+        draw_base = boolean("slicing", props, "draw_base", False)
+        self.rasterise = boolean("slicing", props, "rasterise", True)
         sensor = props.get("sensor", None)
         if slices == "auto" and not isinstance(sensor, mi.Sensor):
             raise ValueError("slicing: slices='auto' needs the scene's camera: "

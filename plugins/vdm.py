@@ -29,6 +29,7 @@ use on any shape (c_V = 0).  Algorithm: :mod:`mi_displace.vdm`.
 from __future__ import annotations
 
 import math
+import sys
 import warnings
 
 import drjit as dr
@@ -38,21 +39,23 @@ import numpy as np
 from mi_displace.core.texture_height import check_texture_finite
 from mi_displace.vdm import auto, build, table
 from mi_displace.vdm.lookup import cached_lookup
-from mi_displace.plugins._guard import constructor
+from mi_displace.plugins._guard import boolean, collector_paused, constructor
 from mi_displace.vdm.steps import VDMSteps, placement_scale
 
 
-def _number(props, name, default, low=None, high=None, integer=False):
+def _number(plugin, props, name, default, low=None, high=None, integer=False):
+    """Property ``name`` as a finite number in [low, high] (an int with ``integer``), else a
+    ValueError naming ``plugin`` and the property."""
     value = props.get(name, default)
     try:
         x = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"vdm: '{name}' must be a number, got {value!r}") from None
+        raise ValueError(f"{plugin}: '{name}' must be a number, got {value!r}") from None
     if not math.isfinite(x) or (low is not None and x < low) or (high is not None and x > high):
-        raise ValueError(f"vdm: '{name}' must be finite and in [{low}, {high}], got {value!r}")
+        raise ValueError(f"{plugin}: '{name}' must be finite and in [{low}, {high}], got {value!r}")
     if integer:
         if x != int(x):
-            raise ValueError(f"vdm: '{name}' must be an integer, got {value!r}")
+            raise ValueError(f"{plugin}: '{name}' must be an integer, got {value!r}")
         return int(x)
     return x
 
@@ -94,11 +97,11 @@ def parse_mesostructure(props: mi.Properties, plugin: str):
         raise ValueError(f"{plugin}: 'depth' must be finite and >= 0 (world units below the "
                          f"reference surface), got {depth!r}")
     tiling = props.get("tiling", None)
-    tu = _number(props, "tiling_u", 1.0 if tiling is None else tiling, 1e-6)
-    tv = _number(props, "tiling_v", 1.0 if tiling is None else tiling, 1e-6)
+    tu = _number(plugin, props, "tiling_u", 1.0 if tiling is None else tiling, 1e-6)
+    tv = _number(plugin, props, "tiling_v", 1.0 if tiling is None else tiling, 1e-6)
     tile_size = props.get("tile_size", None)
     if tile_size is not None:
-        tile_size = _number(props, "tile_size", tile_size, 1e-9)
+        tile_size = _number(plugin, props, "tile_size", tile_size, 1e-9)
     return dict(nested=nested, height=height, depth=depth, tiling=(tu, tv), tile_size=tile_size)
 
 
@@ -109,6 +112,19 @@ def _round_out(x: float, direction, digits: int = 4) -> float:
         return x
     step = 10.0 ** (math.floor(math.log10(abs(x))) - digits + 1)
     return direction(x / step) * step
+
+def _rendering(bsdf: mi.BSDF) -> bool:
+    """Whether the scene being rendered holds ``bsdf``: the innermost ``mi.Scene`` among the
+    locals of the calling Python frames (``mi.render``'s, an integrator's ``render`` or
+    ``sample``) traverses to it; True when no frame holds a scene."""
+    frame = sys._getframe(1)
+    while frame is not None:
+        scenes = [v for v in frame.f_locals.values() if isinstance(v, mi.Scene)]
+        if scenes:
+            return any(bsdf in mi.traverse(scene).hierarchy for scene in scenes)
+        frame = frame.f_back
+    return True
+
 
 class MesostructureBSDF(mi.BSDF):
     """Base of the per-pixel mesostructure BSDFs: flags, nested BSDF plumbing.
@@ -197,6 +213,32 @@ class MesostructureBSDF(mi.BSDF):
                 "<shape type=\"vdm_mesh\"> (tile size and curvature measured there) or give "
                 "'tile_size' [world units of one texture tile]")
 
+    def _ready(self) -> bool:
+        """Whether the precomputation is done (subclasses that set up late)."""
+        return True
+
+    def _unused(self) -> bool:
+        """True for a BSDF that is not set up and not in the scene being rendered.
+
+        Dr.Jit traces every live BSDF into each vectorised call, also those of other scenes
+        still alive (kept by a reference cycle or a notebook's last traceback); such a BSDF
+        traces as its nested material there (no lane reaches it).  Raises the "not set up"
+        error when the scene being rendered holds it (or no scene is found)."""
+        if self._ready():
+            return False
+        self._require(not _rendering(self))
+        return True
+
+    def _state(self, si, active):
+        """``_prepare(si, active)``; for an unused BSDF (``_unused``) the nested material's
+        own interaction, nothing blocked, and state ``None`` (lit everywhere)."""
+        if self._unused():
+            return None, dr.zeros(mi.Bool, dr.width(si.t)), si
+        return self._prepare(si, active)
+
+    def _lit_state(self, state, wo_world) -> mi.Bool:
+        return mi.Bool(True) if state is None else self._lit(state, wo_world)
+
     # -- to implement --------------------------------------------------------------------
     def _setup(self, tile_size: float, meshes) -> None:
         raise NotImplementedError
@@ -214,19 +256,20 @@ class MesostructureBSDF(mi.BSDF):
 
     def _blocked(self, si, active) -> mi.Bool:
         """Where the ray passes through (only for HAS_SILHOUETTE techniques)."""
-        return active & self._prepare(si, active)[1]
+        return active & self._state(si, active)[1]
 
     # -- mi.BSDF -------------------------------------------------------------------------
     def _eval_radiance(self, ctx, si, wo, active):
         """f cos(theta_o) with the view along si.wi and the light along wo (radiance)."""
         active = mi.Bool(active) & self._facing(si.wi)
-        state, blocked, si2 = self._prepare(si, active)
+        state, blocked, si2 = self._state(si, active)
         wo_world = si.to_world(wo)
         ok = active & ~blocked & self._facing(wo)
         f = self.nested.eval(ctx, si2, si2.to_local(wo_world), ok)
-        ok &= self._lit(state, wo_world)
+        ok &= self._lit_state(state, wo_world)
         return dr.select(ok, mi.Spectrum(f), 0.0)
 
+    @collector_paused
     def eval(self, ctx, si, wo, active=True):
         if ctx.mode != mi.TransportMode.Importance:
             return self._eval_radiance(ctx, si, wo, active)
@@ -242,32 +285,35 @@ class MesostructureBSDF(mi.BSDF):
         correction = dr.abs(dr.dot(wo, ng)) / dr.maximum(dr.abs(dr.dot(si.wi, ng)), 1e-6)
         return f * correction
 
+    @collector_paused
     def pdf(self, ctx, si, wo, active=True):
         active = mi.Bool(active) & self._facing(si.wi)
-        _, blocked, si2 = self._prepare(si, active)
+        _, blocked, si2 = self._state(si, active)
         ok = active & ~blocked
         return dr.select(ok, self.nested.pdf(ctx, si2, si2.to_local(si.to_world(wo)), ok), 0.0)
 
+    @collector_paused
     def eval_pdf(self, ctx, si, wo, active=True):
         active = mi.Bool(active) & self._facing(si.wi)
-        state, blocked, si2 = self._prepare(si, active)
+        state, blocked, si2 = self._state(si, active)
         wo_world = si.to_world(wo)
         ok = active & ~blocked
         f, pdf = self.nested.eval_pdf(ctx, si2, si2.to_local(wo_world), ok)
         pdf = dr.select(ok, pdf, 0.0)
         if ctx.mode == mi.TransportMode.Importance:
             return self.eval(ctx, si, wo, active), pdf
-        lit = ok & self._facing(wo) & self._lit(state, wo_world)
+        lit = ok & self._facing(wo) & self._lit_state(state, wo_world)
         return dr.select(lit, mi.Spectrum(f), 0.0), pdf
 
+    @collector_paused
     def sample(self, ctx, si, sample1, sample2, active=True):
         active = mi.Bool(active)
-        state, blocked, si2 = self._prepare(si, active)
+        state, blocked, si2 = self._state(si, active)
         front = active & ~blocked & self._facing(si.wi)
         bs, weight = self.nested.sample(ctx, si2, sample1, sample2, front)
         wo_world = si2.to_world(bs.wo)
         wo = si.to_local(wo_world)
-        keep = front & self._facing(wo) & self._lit(state, wo_world)
+        keep = front & self._facing(wo) & self._lit_state(state, wo_world)
         weight = dr.select(keep, mi.Spectrum(weight), 0.0)
         if ctx.mode == mi.TransportMode.Importance:
             # sampled in the frame seen from wi, weighted by the adjoint value (eval)
@@ -281,15 +327,17 @@ class MesostructureBSDF(mi.BSDF):
         bs.sampled_component = dr.select(passes, mi.UInt32(self.null_index), bs.sampled_component)
         return bs, dr.select(passes, 1.0, weight)
 
+    @collector_paused
     def eval_null_transmission(self, si, active=True):
         active = mi.Bool(active)
         if not self.HAS_SILHOUETTE:
             return dr.zeros(mi.Spectrum, dr.width(si.uv))
         return mi.Spectrum(dr.select(self._blocked(si, active), 1.0, 0.0))
 
+    @collector_paused
     def eval_diffuse_reflectance(self, si, active=True):
         active = mi.Bool(active)
-        _, blocked, si2 = self._prepare(si, active)
+        _, blocked, si2 = self._state(si, active)
         albedo = self.nested.eval_diffuse_reflectance(si2, active & ~blocked)
         return dr.select(active & ~blocked, mi.Spectrum(albedo), 0.0)
 
@@ -315,27 +363,29 @@ class VDM(MesostructureBSDF):
                              "size of one tile: give the sensor (<ref name=\"sensor\" "
                              "id=\"...\"/>)")
         self.spec = build.VDMSpec(
-            res=128 if "res" in self.auto else _number(props, "res", 128, 1, 1024, True),
-            n_theta=8 if "theta" in self.auto else _number(props, "theta", 8, 2, 64, True),
-            n_phi=_number(props, "phi", 32, 4, 256, True),
-            n_curv=_number(props, "curvatures", 16, 1, 64, True),
-            theta_oversample=_number(props, "theta_oversample", 1, 1, 8, True))
-        self.svd_terms = _number(props, "svd_terms", 8, 1, build.K_STORED, True)
-        self.mvm_terms = _number(props, "mvm_terms", 4, 1, build.K_STORED, True)
-        self.shadows = bool(props.get("shadows", True))
-        self.shadow_bias = _number(props, "shadow_bias", 0.0, 0.0)
-        self.shadow_slack = _number(props, "shadow_slack", 0.0, 0.0)
-        self.shadow_verify = _number(props, "shadow_verify", 3, 0, 64, True)
-        self.refine_steps = _number(props, "refine_steps", 8, 0, 256, True)
-        self.refine_window = _number(props, "refine_window", 0.5, 0.0, 10.0)
-        self.use_cache = bool(props.get("cache", True))
-        self.curvature_percentile = _number(props, "curvature_percentile", 0.0, 0.0, 49.0)
+            res=128 if "res" in self.auto else _number("vdm", props, "res", 128, 1, 1024, True),
+            n_theta=8 if "theta" in self.auto else _number("vdm", props, "theta", 8, 2, 64, True),
+            n_phi=_number(self.PLUGIN, props, "phi", 32, 4, 256, True),
+            n_curv=_number(self.PLUGIN, props, "curvatures", 16, 1, 64, True),
+            theta_oversample=_number(self.PLUGIN, props, "theta_oversample", 1, 1, 8, True))
+        self.svd_terms = _number(self.PLUGIN, props, "svd_terms", 8, 1, build.K_STORED, True)
+        self.mvm_terms = _number(self.PLUGIN, props, "mvm_terms", 4, 1, build.K_STORED, True)
+        self.shadows = boolean(self.PLUGIN, props, "shadows", True)
+        self.shadow_bias = _number(self.PLUGIN, props, "shadow_bias", 0.0, 0.0)
+        self.shadow_slack = _number(self.PLUGIN, props, "shadow_slack", 0.0, 0.0)
+        self.shadow_verify = _number(self.PLUGIN, props, "shadow_verify", 3, 0, 64, True)
+        self.refine_steps = _number(self.PLUGIN, props, "refine_steps", 8, 0, 256, True)
+        self.refine_window = _number(self.PLUGIN, props, "refine_window", 0.5, 0.0, 10.0)
+        self.use_cache = boolean(self.PLUGIN, props, "cache", True)
+        self.curvature_percentile = _number(self.PLUGIN, props, "curvature_percentile",
+                                            0.0, 0.0, 49.0)
         c_min, c_max = props.get("curvature_min", None), props.get("curvature_max", None)
         self.fixed_range = None
         if (c_min is None) != (c_max is None):
             raise ValueError("vdm: give both 'curvature_min' and 'curvature_max' or neither")
         if c_min is not None:
-            lo, hi = _number(props, "curvature_min", c_min), _number(props, "curvature_max", c_max)
+            lo = _number(self.PLUGIN, props, "curvature_min", c_min)
+            hi = _number(self.PLUGIN, props, "curvature_max", c_max)
             if lo > hi:
                 raise ValueError(f"vdm: 'curvature_min' ({lo}) > 'curvature_max' ({hi})")
             self.fixed_range = (lo, hi)
@@ -399,7 +449,7 @@ class VDM(MesostructureBSDF):
                     f"vdm: '{name}' = {k} exceeds the {stored} eigen-functions this table keeps "
                     f"({len(spec.curvatures())} curvature(s) x ({spec.n_theta} theta + 1) "
                     f"columns, at most {build.K_STORED}); lower it or raise 'theta'")
-        heights = table.sample_heights(self.height, spec.res, self.tiling)
+        heights = table.sample_heights(self.height, spec.res, self.tiling, self.PLUGIN)
         self._check_periodic(heights)
         self.data = build.build(heights, spec, use_cache=self.use_cache)
         lookup = cached_lookup(self.data, self.svd_terms, self.mvm_terms)
@@ -433,8 +483,10 @@ class VDM(MesostructureBSDF):
         self._require(self.stats.get("tile_size") is not None)
         self._setup(self.stats["tile_size"], self._meshes)
 
+    def _ready(self) -> bool:
+        return self.steps is not None
+
     def _prepare(self, si, active):
-        self._require(self.steps is not None)
         fp = self.steps.footprint(si, active)
         return fp, fp.silhouette, self.steps.shading(si, fp)
 
@@ -442,7 +494,8 @@ class VDM(MesostructureBSDF):
         return self.steps.lit(state, wo_world)
 
     def _blocked(self, si, active):
-        self._require(self.steps is not None)
+        if self._unused():
+            return dr.zeros(mi.Bool, dr.width(si.t))
         return self.steps.silhouette(si, active)
 
     def to_string(self):

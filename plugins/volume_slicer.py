@@ -24,7 +24,7 @@ method.  ``mi.render`` returns a (height, width, 3) image; ``spp`` and ``seed`` 
 import mitsuba as mi
 
 from mi_displace.volume import slicing
-from mi_displace.plugins._guard import constructor
+from mi_displace.plugins._guard import boolean, constructor
 
 
 class VolumeSlicer(mi.SamplingIntegrator):
@@ -48,7 +48,7 @@ class VolumeSlicer(mi.SamplingIntegrator):
             spacing=float(props.get("spacing", 1.0)), albedo=albedo,
             color=(0.8, 0.7, 0.55) if color is None else tuple(mi.ScalarColor3f(color)),
             iso=float(props.get("iso", 0.5)), sharpness=float(props.get("sharpness", 4.0)),
-            shadows=bool(props.get("shadows", True)),
+            shadows=boolean("volume_slicer", props, "shadows", True),
             light_resolution=props.get("light_resolution", None), aa=int(props.get("aa", 1)))
         slicing.check_slices(volume.volume, self.settings)
 

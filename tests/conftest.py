@@ -35,8 +35,17 @@ def variant_llvm():
 
 @pytest.fixture(autouse=True)
 def _release_scenes():
-    """Collect each test's garbage (scenes and plugin objects kept alive by reference cycles,
-    e.g. an exception's traceback) before the next test: a Python plugin object that outlives
-    its scene can otherwise still be found by a later scene's vectorised calls."""
+    """Collect each test's garbage before the next test.
+
+    The library no longer needs it for its own checks (a BSDF that is not set up fails only
+    its own scene: tests/vdm/test_vdm_scene_sequence.py).  But tests drop scenes inside
+    reference cycles (``pytest.raises`` keeps tracebacks), and Dr.Jit traces every live
+    instance into each vectorised call through plain pointers: Python's collector, started
+    by an allocation inside that trace, can free a dropped scene's instance before its turn
+    (a segfault that depends on test order).  Our plugin methods and the raster integrator
+    pause the collector (plugins/_guard.py ``collector_paused``); allocations in Dr.Jit's
+    and nanobind's own code between instances, under Mitsuba's C++ integrators, cannot be
+    covered from Python, so the suite does not leave garbage for them."""
     yield
     gc.collect()
+

@@ -70,12 +70,15 @@ def _restored(extra):
     return lambda tmp, n: {"type": "restored", "map": str(BUNNY_MAP), "levels": 1, **extra(tmp)}
 
 
-def _garbage_map(tmp_path: Path) -> str:
-    """A garbage PNG next to a valid sidecar (so the image itself is what fails)."""
-    path = _garbage(tmp_path, ".png")
+def _garbage_map(tmp_path: Path, suffix: str = ".png") -> str:
+    """A garbage PNG (or EXR: the "float" format) next to a valid sidecar (so the image
+    itself is what fails)."""
+    path = _garbage(tmp_path, suffix)
     meta = json.loads(Path(f"{BUNNY_MAP}.json").read_text())
     meta["low"] = str(BUNNY_MAP.parent / meta["low"])
     meta["valid"], meta["file"] = None, Path(path).name
+    if suffix == ".exr":
+        meta["format"] = "float"
     Path(f"{path}.json").write_text(json.dumps(meta))
     return path
 
@@ -145,6 +148,7 @@ CASES = {
         "misspelt": (_bsdf("vdm", lambda t: {"svd_term": 8}), "svd_term"),
         "wrong_type": (_bsdf("vdm", lambda t: {"svd_terms": "eight"}), "svd_terms"),
         "non_finite": (_bsdf("vdm", lambda t: {"depth": NAN}), "depth"),
+        "not_a_boolean": (_bsdf("vdm", lambda t: {"shadows": "maybe"}), "shadows"),
     },
     "horizon": {
         "misspelt": (_bsdf("horizon", lambda t: {"azimuth": 16}), "azimuth"),
@@ -160,8 +164,10 @@ CASES = {
         "misspelt": (_restored(lambda t: {"levles": 2}), "levles"),
         "wrong_type": (_restored(lambda t: {"levels": "two"}), "levels"),
         "non_finite": (_restored(lambda t: {"levels": NAN}), "levels"),
+        "not_a_boolean": (_restored(lambda t: {"keep_holes": "maybe"}), "keep_holes"),
         "missing_file": (_restored(lambda t: {"map": _missing(t, ".png")}), "no_such_file.png"),
         "garbage_file": (_restored(lambda t: {"map": _garbage_map(t)}), "garbage.png"),
+        "garbage_exr_file": (_restored(lambda t: {"map": _garbage_map(t, ".exr")}), "garbage.exr"),
         "missing_low": (_restored(lambda t: {"low": _missing(t, ".obj")}), "no_such_file.obj"),
         "garbage_low": (_restored(lambda t: {"low": _garbage(t, ".obj")}), "garbage.obj"),
     },
@@ -174,6 +180,7 @@ CASES = {
         "misspelt": (_slicing(lambda t: {"slcies": 4}), "slcies"),
         "wrong_type": (_slicing(lambda t: {"slices": "many"}), "slices"),
         "non_finite": (_slicing(lambda t: {"scale": NAN}), "scale"),
+        "not_a_boolean": (_slicing(lambda t: {"draw_base": "maybe"}), "draw_base"),
         "missing_file": (_slicing(lambda t: {"base": "mesh", "filename": _missing(t, ".obj")}),
                          "no_such_file.obj"),
         "garbage_file": (_slicing(lambda t: {"base": "mesh", "filename": _garbage(t, ".obj")}),
@@ -201,6 +208,7 @@ CASES = {
         "misspelt": (_of_volume("volume_slicer", lambda t: {"spaceing": 1.0}), "spaceing"),
         "wrong_type": (_of_volume("volume_slicer", lambda t: {"spacing": "big"}), "spacing"),
         "non_finite": (_of_volume("volume_slicer", lambda t: {"spacing": NAN}), "spacing"),
+        "not_a_boolean": (_of_volume("volume_slicer", lambda t: {"shadows": "maybe"}), "shadows"),
     },
     "volume_isosurface": {
         "misspelt": (_of_volume("volume_isosurface", lambda t: {"isso": 0.5}), "isso"),
@@ -229,11 +237,7 @@ CASES = {
 }
 
 #: (plugin, case) -> reason, for cases that fail today in code owned by another branch.
-XFAIL = {
-    ("restored", "garbage_file"): "a map that is not an image: mi.Bitmap's RuntimeError 'Unknown "
-                                  "file format' (no file name) escapes mi_displace/bake/formats.py "
-                                  "read_png_raw (bake branch)",
-}
+XFAIL: dict = {}
 
 
 def _params():
@@ -295,6 +299,26 @@ def test_bad_input_is_one_clear_error(variant, tmp_path, kernels, plugin, case, 
     compiled = [k for k in launched if k["type"] == dr.KernelType.JIT]
     if case != "misspelt":
         assert compiled == [], f"{len(compiled)} kernel(s) ran before the error: {message}"
+
+
+def test_boolean_strings_parse_as_booleans(variant, tmp_path, monkeypatch):
+    """``bool("false")`` is True: a string ``false`` (load_dict, ``-D``) must switch off."""
+    from mi_displace.plugins._guard import boolean
+
+    props = mi.Properties()
+    for text, expected in (("false", False), ("False", False), (" no ", False), ("0", False),
+                           ("true", True), ("TRUE", True), ("yes", True)):
+        props["flag"] = text
+        assert boolean("vdm", props, "flag", not expected) is expected, text
+    props["flag"] = 0
+    assert boolean("vdm", props, "flag", True) is False
+    assert boolean("vdm", mi.Properties(), "flag", True) is True    # the default
+    monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
+    small = {"res": 8, "theta": 4, "phi": 8, "curvatures": 1, "svd_terms": 4, "mvm_terms": 2}
+    for text, expected in (("false", False), ("true", True)):
+        vdm = mi.load_dict({"type": "vdm", "height": {"type": "cells"}, "depth": 0.05,
+                            "tile_size": 1.0, "shadows": text, "cache": text, **small})
+        assert vdm.shadows is expected and vdm.use_cache is expected
 
 
 # -- files that must load -------------------------------------------------------------------

@@ -105,10 +105,14 @@ def write_png_raw(path: Path, data: np.ndarray) -> None:
 
 
 def read_png_raw(path: Path) -> np.ndarray:
-    """Integer data (H, W, C) of a PNG, exactly as stored."""
+    """Integer data (H, W, C) of a PNG, exactly as stored; ``ValueError`` naming the file
+    when it is not an image Mitsuba can read."""
     import mitsuba as mi
 
-    data = np.asarray(mi.Bitmap(str(path)))
+    try:
+        data = np.asarray(mi.Bitmap(str(path)))
+    except RuntimeError as error:   # mi.Bitmap: "Unknown file format", no file name
+        raise ValueError(f"map file {str(path)!r} is not a readable PNG image ({error})") from None
     return data if data.ndim == 3 else data[:, :, None]
 
 
@@ -122,10 +126,15 @@ def write_exr_channels(path: Path, channels: dict) -> None:
 
 
 def read_exr_channels(path: Path) -> dict:
+    """Float32 planes of an EXR by channel name; ``ValueError`` naming the file when it is
+    not an EXR image."""
     import OpenEXR
 
-    with OpenEXR.File(str(path), separate_channels=True) as f:
-        return {k: np.asarray(v.pixels, np.float32) for k, v in f.channels().items()}
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            return {k: np.asarray(v.pixels, np.float32) for k, v in f.channels().items()}
+    except RuntimeError as error:
+        raise ValueError(f"map file {str(path)!r} is not a readable EXR image ({error})") from None
 
 
 def write_map(out_dir: Path, fmt: str, maps: dict, meta: dict) -> Path:

@@ -11,10 +11,11 @@ the same and what the machinery costs.
 """
 from __future__ import annotations
 
-import json as json_mod
 import statistics
 import time
 from pathlib import Path
+
+from mi_displace.bench._timing import print_record
 
 SCENE = Path(__file__).resolve().parents[2] / "tests" / "data" / "tradeoff" / "bumpy_sphere.xml"
 KNOBS = ("resolution=6,8,12,16,24,32,48,64", "ball.scale=0.1,0.15,0.2")
@@ -62,10 +63,5 @@ def run() -> dict:
 
 
 def main(json: bool = False) -> int:
-    record = run()
-    if json:
-        print(json_mod.dumps(record, indent=2))
-    else:
-        for key, value in record.items():
-            print(f"{key}: {value}")
+    print_record(run(), json, width=0)
     return 0

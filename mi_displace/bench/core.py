@@ -9,23 +9,12 @@
 """
 from __future__ import annotations
 
-import json as _json
-import statistics
-import time
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-
-def _median_time(fn, repeats: int = 3) -> float:
-    fn()  # cold: JIT compilation
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+from mi_displace.bench._timing import median_time, print_record
 
 
 def _sphere(nu: int) -> dict:
@@ -63,7 +52,7 @@ def run() -> dict:
         shape_4m = mi.load_dict(_sphere(2000))
         dr.sync_thread()
 
-    tess = _median_time(tessellate)
+    tess = median_time(tessellate, 3)
     faces_4m = shape_4m.face_count()
 
     def accel():
@@ -71,12 +60,12 @@ def run() -> dict:
         dr.sync_thread()
         return scene
 
-    accel_s = _median_time(accel)
+    accel_s = median_time(accel, 3)
     shape_1m = mi.load_dict(_sphere(1000))
     raster_scene = _scene(shape_1m, {"type": "raster"})
     path_scene = _scene(shape_1m, {"type": "path", "max_depth": 2})
-    raster_s = _median_time(lambda: _render(raster_scene), repeats=5)
-    path_s = _median_time(lambda: _render(path_scene, spp=1), repeats=5)
+    raster_s = median_time(lambda: _render(raster_scene), repeats=5)
+    path_s = median_time(lambda: _render(path_scene, spp=1), repeats=5)
     img = np.asarray(mi.render(raster_scene))
     if not np.all(np.isfinite(img)) or img.mean() <= 0:
         raise RuntimeError("bench core: raster image is not finite or black")
@@ -96,9 +85,5 @@ def run() -> dict:
 
 def main(json: bool = False) -> dict:
     record = run()
-    if json:
-        print(_json.dumps(record, indent=2))
-    else:
-        for key, value in record.items():
-            print(f"{key:>24}: {value:.4g}" if isinstance(value, float) else f"{key:>24}: {value}")
+    print_record(record, json)
     return record

@@ -15,14 +15,14 @@
 """
 from __future__ import annotations
 
-import json as _json
-import statistics
 import time
 from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+
+from mi_displace.bench._timing import median_time, print_record
 
 from mi_displace.ddm import accuracy
 from mi_displace.ddm.animation import Animation
@@ -34,16 +34,6 @@ BUNNY = str(ROOT / "data" / "bunny" / "bun_zipper_res3.ply")
 SPEED_TILES = (148, 128)     # 18944 thorns x 162 vertices = 3.07M vertices
 
 
-def _median(fn, repeats: int = 5) -> float:
-    fn()
-    times = []
-    for _ in range(repeats):
-        dr.sync_thread()
-        start = time.perf_counter()
-        fn()
-        dr.sync_thread()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
 
 
 def _map_timer(model: DDMModel, method: str):
@@ -97,7 +87,7 @@ def table1(tmp: Path) -> list[dict]:
             model = DDMModel(DDMConfig(mode="maps", **kw))
             dr.sync_thread()
             build = time.perf_counter() - start
-        map_s = _median(_map_timer(model, "naive"), 3)
+        map_s = median_time(_map_timer(model, "naive"), 3)
         load_s, render_s = _render_time(kw)
         out.append({
             "scene": scene, "paper_tile": tile, "paper_polygons_per_tile": polys,
@@ -133,7 +123,7 @@ def _render_time(kw: dict) -> tuple[float, float]:
         img = np.asarray(mi.render(scene))
         if not np.all(np.isfinite(img)) or img.max() <= 0:
             raise RuntimeError(f"bench ddm: raster image of {kw} is not finite or black")
-    return load_s, _median(run, 3)
+    return load_s, median_time(run, 3)
 
 
 def run() -> dict:
@@ -145,7 +135,7 @@ def run() -> dict:
     models = {mode: DDMModel(DDMConfig(**{**accuracy.THORNS_SPHERE, "tiles_u": nu, "tiles_v": nv},
                                         mode=mode, map_resolution=256))
               for mode in ("maps", "exact")}
-    speed = {f"{mode}_{method}": _median(_map_timer(models[mode], method))
+    speed = {f"{mode}_{method}": median_time(_map_timer(models[mode], method))
              for mode in ("maps", "exact") for method in ("tangent", "jacobian", "naive")}
     vertices = models["maps"].vertex_count
     del models
@@ -182,14 +172,6 @@ def run() -> dict:
 
 def main(json: bool = False) -> int:
     record = run()
-    if json:
-        print(_json.dumps(record, indent=2))
-    else:
-        for key, value in record.items():
-            if key == "table1":
-                for row in value:
-                    print(f"{'table1':>24}: {row}")
-            else:
-                print(f"{key:>24}: {value:.4g}" if isinstance(value, float) else f"{key:>24}: {value}")
+    print_record(record, json)
     ok = record["vertices"] >= 3_000_000 and np.isfinite(record["map_time_warm_s"])
     return 0 if ok else 1

@@ -32,6 +32,7 @@ from pathlib import Path
 import drjit as dr
 import mitsuba as mi
 
+from mi_displace.bench._timing import print_record
 from mi_displace.evaluate import metrics
 from mi_displace.render import scene as scenes
 
@@ -250,9 +251,5 @@ def main(json: bool = False, replot: bool = False) -> int:
     figures.mkdir(parents=True, exist_ok=True)
     (figures / "dicing_bench.json").write_text(_json.dumps(result, indent=2))
     plot(result["sweeps"], figures / "dicing_flip_vs_faces.png")
-    if json:
-        print(_json.dumps(result["summary"], indent=2))
-    else:
-        for key, value in result["summary"].items():
-            print(f"{key}: {value}")
+    print_record(result["summary"], json, width=0)
     return 0

@@ -42,6 +42,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.bench._timing import print_record
 from mi_displace.core import tessellate
 from mi_displace.core.texture_height import height_function
 from mi_displace.inverse import figures, gradcheck, recover
@@ -269,9 +270,5 @@ def main(json: bool = False) -> int:
     figures_dir = ROOT / "docs" / "figures"
     figures_dir.mkdir(parents=True, exist_ok=True)
     (figures_dir / "grad_bench.json").write_text(_json.dumps(result, indent=2))
-    if json:
-        print(_json.dumps(result["summary"], indent=2))
-    else:
-        for key, value in result["summary"].items():
-            print(f"{key}: {value}")
+    print_record(result["summary"], json, width=0)
     return 0

@@ -42,7 +42,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.bench.ddm import _median
+from mi_displace.bench._timing import median_time
 from mi_displace.render import raster
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -189,8 +189,8 @@ def llvmpipe_frame(shape, sensor: mi.Sensor, res: int = RES) -> dict:
             vbo.write(vertices.tobytes())
             return frame()
 
-        frame_s = _median(frame, 5)
-        upload_s = _median(upload_frame, 3)
+        frame_s = median_time(frame, 5)
+        upload_s = median_time(upload_frame, 3)
         image = frame().reshape(res, res, 3)[::-1]
         return {"llvmpipe_s": frame_s, "llvmpipe_upload_s": upload_s,
                 "llvmpipe_renderer": ctx.info["GL_RENDERER"],
@@ -236,9 +236,9 @@ def ddm_frames(out: dict) -> None:
         params.update()
 
     zb = _unbuilt(shape, raster.Options(visibility="zbuffer", shadows="none"), sensor=sensor)
-    out["ddm_frame_s"] = _median(frame(zb, edit_shape))
+    out["ddm_frame_s"] = median_time(frame(zb, edit_shape))
     zbm = _unbuilt(shape, raster.Options(visibility="zbuffer", shadows="map"), sensor=sensor)
-    out["ddm_frame_shadow_map_s"] = _median(frame(zbm, edit_shape))
+    out["ddm_frame_shadow_map_s"] = median_time(frame(zbm, edit_shape))
     del zb, zbm
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -249,7 +249,7 @@ def ddm_frames(out: dict) -> None:
         scene_params["camel.time"] = t
         scene_params.update()   # the scene rebuilds its acceleration structure
 
-    out["ddm_frame_raytrace_s"] = _median(frame(rt, edit_scene), 3)
+    out["ddm_frame_raytrace_s"] = median_time(frame(rt, edit_scene), 3)
 
 
 def run(nu: int = 2000, with_ddm: bool = True, with_gl: bool = True) -> dict:
@@ -265,20 +265,20 @@ def run(nu: int = 2000, with_ddm: bool = True, with_gl: bool = True) -> dict:
     dr.sync_thread()
     record["faces"] = shape.face_count()
     zb = _unbuilt(shape, raster.Options(visibility="zbuffer", shadows="none"))
-    record["zbuffer_s"] = _median(lambda: _image(zb))
+    record["zbuffer_s"] = median_time(lambda: _image(zb))
     zb_image = _image(zb)
     zbm = _unbuilt(shape, raster.Options(visibility="zbuffer", shadows="map"))
-    record["zbuffer_shadow_map_s"] = _median(lambda: _image(zbm))
+    record["zbuffer_shadow_map_s"] = median_time(lambda: _image(zbm))
     del zbm
 
     def build():
         return scene({"shape": shape}, raster.Options(shadows="none"))
 
-    record["accel_build_s"] = _median(lambda: (build(), dr.sync_thread()), 3)
-    record["raytrace_s"] = _median(lambda: _image(build()), 3)
+    record["accel_build_s"] = median_time(lambda: (build(), dr.sync_thread()), 3)
+    record["raytrace_s"] = median_time(lambda: _image(build()), 3)
     rt_image = _image(build())
     rtr = scene({"shape": shape}, raster.Options(shadows="ray"))
-    record["raytrace_shadow_rays_s"] = record["accel_build_s"] + _median(lambda: _image(rtr), 3)
+    record["raytrace_shadow_rays_s"] = record["accel_build_s"] + median_time(lambda: _image(rtr), 3)
     del rtr
     record["zbuffer_vs_raytrace_pixels_differing"] = float(
         np.mean(np.abs(zb_image - rt_image).max(axis=2) > 1e-3))
@@ -413,7 +413,7 @@ def _load(name: str, res: int) -> mi.Scene:
 def _render(sc: mi.Scene, options: raster.Options) -> tuple[np.ndarray, float]:
     integrator = sc.integrator()
     integrator.options = options
-    seconds = _median(lambda: _image(sc), 3)
+    seconds = median_time(lambda: _image(sc), 3)
     return _image(sc), seconds
 
 
@@ -560,10 +560,10 @@ def approximation_times(res: int = 256) -> list[dict]:
     where the acceleration build (measured alone on the loaded shapes) is not needed."""
     rows = []
     for name in COMPARE_SCENES:
-        load_s = _median(lambda: (_load(name, res), dr.sync_thread()), 3)
+        load_s = median_time(lambda: (_load(name, res), dr.sync_thread()), 3)
         sc = _load(name, res)
         shapes = list(sc.shapes())
-        build_s = _median(lambda: (mi.load_dict(
+        build_s = median_time(lambda: (mi.load_dict(
             {"type": "scene", **{f"s{i}": s for i, s in enumerate(shapes)}}), dr.sync_thread()), 3)
         _, ray_s = _render(sc, raster.Options())
         _, zb_s = _render(sc, raster.Options(visibility="zbuffer"))

@@ -21,7 +21,6 @@ texture memory, accuracy, and VTK's CPU volume renderer on the same volume.
 """
 from __future__ import annotations
 
-import json as _json
 import os
 import statistics
 import subprocess
@@ -33,6 +32,8 @@ from pathlib import Path
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+
+from mi_displace.bench._timing import print_record
 
 ROOT = Path(__file__).resolve().parents[2]
 WALNUT = ROOT / "data" / "volumes" / "walnut_128x96x114_uint16.raw"
@@ -224,9 +225,5 @@ def run(with_flip: bool = True) -> dict:
 
 def main(json: bool = False) -> dict:
     record = run()
-    if json:
-        print(_json.dumps(record, indent=2))
-    else:
-        for key, value in record.items():
-            print(f"{key:>26}: {value:.4g}" if isinstance(value, float) else f"{key:>26}: {value}")
+    print_record(record, json, width=26)
     return record

@@ -34,6 +34,11 @@ MAX_CELLS = 1 << 15  # cell keys i + n*j must fit in 32 bits
 
 # ----------------------------------------------------------------------------- validation
 
+def _bound(x) -> str:
+    """An interval end as written in messages: integers in full (2147483647), else ``:g``."""
+    return str(x) if isinstance(x, int) else f"{x:g}"
+
+
 def check_real(pattern: str, name: str, value, low=None, high=None, low_open=False,
                high_open=False) -> float:
     """``value`` (a number or a width-1 Dr.Jit array, checked by its detached value) as a
@@ -52,8 +57,8 @@ def check_real(pattern: str, name: str, value, low=None, high=None, low_open=Fal
            or (low is not None and (x <= low if low_open else x < low))
            or (high is not None and (x >= high if high_open else x > high)))
     if bad:
-        lo = "(-inf" if low is None else ("(" if low_open else "[") + f"{low:g}"
-        hi = "inf)" if high is None else f"{high:g}" + (")" if high_open else "]")
+        lo = "(-inf" if low is None else ("(" if low_open else "[") + _bound(low)
+        hi = "inf)" if high is None else _bound(high) + (")" if high_open else "]")
         raise ValueError(f"{pattern}: parameter '{name}' must be finite and in {lo}, {hi}, "
                          f"got {value!r}")
     return x

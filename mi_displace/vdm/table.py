@@ -46,35 +46,37 @@ def phi_grid(n_phi: int) -> np.ndarray:
 HEIGHT_TOLERANCE = 1e-3   # filtering may overshoot [0, 1] by this much (then clipped)
 
 
-def check_heights(heights: np.ndarray, name: str = "height") -> np.ndarray:
-    """A finite float32 (res_y, res_x) height grid in [0, 1], else ValueError (values within
-    :data:`HEIGHT_TOLERANCE` outside are clipped: filtering overshoot)."""
+def check_heights(heights: np.ndarray, name: str = "height", plugin: str = "vdm") -> np.ndarray:
+    """A finite float32 (res_y, res_x) height grid in [0, 1], else ValueError naming ``plugin``
+    (values within :data:`HEIGHT_TOLERANCE` outside are clipped: filtering overshoot)."""
     heights = np.asarray(heights, dtype=np.float32)
     if heights.ndim != 2 or min(heights.shape) < 1:
-        raise ValueError(f"vdm: '{name}' grid must be a non-empty 2-D array, got shape {heights.shape}")
+        raise ValueError(f"{plugin}: '{name}' grid must be a non-empty 2-D array, "
+                         f"got shape {heights.shape}")
     bad = ~np.isfinite(heights)
     if bad.any():
-        raise ValueError(f"vdm: '{name}' holds {int(bad.sum())} NaN/Inf height value(s); "
+        raise ValueError(f"{plugin}: '{name}' holds {int(bad.sum())} NaN/Inf height value(s); "
                          "clean the height map first")
     lo, hi = float(heights.min()), float(heights.max())
     if lo < -HEIGHT_TOLERANCE or hi > 1 + HEIGHT_TOLERANCE:
-        raise ValueError(f"vdm: '{name}' values must lie in [0, 1] (1 = the reference surface), "
+        raise ValueError(f"{plugin}: '{name}' values must lie in [0, 1] (1 = the reference surface), "
                          f"got {lo:.4g}..{hi:.4g}; rescale the height map (or use 'depth')")
     return np.clip(heights, 0.0, 1.0)
 
 
-def sample_heights(texture: mi.Texture, res: int, tiling=(1.0, 1.0)) -> np.ndarray:
+def sample_heights(texture: mi.Texture, res: int, tiling=(1.0, 1.0),
+                   plugin: str = "vdm") -> np.ndarray:
     """Heights H at the texel centres of one tile, shape (res, res) float32 (row = y).
 
     The texture is evaluated at ``uv = T / tiling`` (its own ``to_uv`` applies), so one tile
-    is one period of the texture as it appears on the surface.
+    is one period of the texture as it appears on the surface.  Errors name ``plugin``.
     """
     i = dr.arange(mi.UInt32, res * res)
     tu, tv = (mi.Float(i % res) + 0.5) / res, (mi.Float(i // res) + 0.5) / res
     si = dr.zeros(mi.SurfaceInteraction3f, res * res)
     si.uv = mi.Point2f(tu / float(tiling[0]), tv / float(tiling[1]))
     h = np.asarray(texture.eval_1(si), dtype=np.float32).reshape(res, res)
-    return check_heights(h)
+    return check_heights(h, plugin=plugin)
 
 
 #: Wrap-around / interior difference ratio above which a tile is not one period.

@@ -26,7 +26,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.volume import maps
+from mi_displace.volume import maps, objects
 
 BITS = (8, 16, 32)
 #: Most voxels of one D_k (refused before anything is allocated).
@@ -35,13 +35,7 @@ MAX_MAP_VOXELS = 256 ** 3
 
 def check_resolution(res, what: str) -> tuple[int, int, int]:
     """A D_k resolution (x, y, z): integers >= 2 (central differences), at most MAX_MAP_VOXELS."""
-    res = tuple(int(r) for r in res)
-    if len(res) != 3 or any(r < 2 for r in res):
-        raise ValueError(f"{what}: expected three integers >= 2, got {res}")
-    if int(np.prod(res, dtype=np.int64)) > MAX_MAP_VOXELS:
-        raise ValueError(f"{what}: {res} is {np.prod(res, dtype=np.int64):,} voxels, more than the "
-                         f"limit of {MAX_MAP_VOXELS:,}")
-    return res
+    return objects.check_resolution(res, what, minimum=2, limit=MAX_MAP_VOXELS)
 
 
 def quantise(values: np.ndarray, bits: int, scale: float) -> np.ndarray:

@@ -26,14 +26,16 @@ MAX_VOXELS = 512 ** 3
 RAW_DTYPES = {"uint8": "u1", "uint16": "u2", "int16": "i2", "uint32": "u4", "float32": "f4"}
 
 
-def check_resolution(shape, what: str) -> tuple[int, ...]:
-    """Validate a 3-D grid resolution (positive integers, at most :data:`MAX_VOXELS`)."""
+def check_resolution(shape, what: str, minimum: int = 1, limit: int = MAX_VOXELS) -> tuple[int, ...]:
+    """Validate a 3-D grid resolution: three integers >= ``minimum``, at most ``limit`` voxels
+    (default :data:`MAX_VOXELS`), else a ``ValueError`` starting with ``what``."""
     shape = tuple(int(s) for s in shape)
-    if len(shape) != 3 or any(s < 1 for s in shape):
-        raise ValueError(f"{what}: expected three positive sizes, got {shape}")
-    if int(np.prod(shape, dtype=np.int64)) > MAX_VOXELS:
+    if len(shape) != 3 or any(s < minimum for s in shape):
+        sizes = "positive sizes" if minimum == 1 else f"integers >= {minimum}"
+        raise ValueError(f"{what}: expected three {sizes}, got {shape}")
+    if int(np.prod(shape, dtype=np.int64)) > limit:
         raise ValueError(f"{what}: {shape} is {np.prod(shape, dtype=np.int64):,} voxels, more than "
-                         f"the limit of {MAX_VOXELS:,}")
+                         f"the limit of {limit:,}")
     return shape
 
 

@@ -72,3 +72,35 @@ def test_both_walls_moving_towards_each_other_cross(variant):
     assert alone["crossing_vertices"] == 0
     assert both["crossing_vertices"] > 0.95 * t.vertex_count
     assert both["max_depth_ratio"] == pytest.approx(0.02 / WALL, rel=0.1)
+
+
+def _full_depth_check(pos, nrm, uvs, faces, base, scale):
+    """Both walls of Spot moved ``scale`` inwards everywhere (h = 0, midlevel 1)."""
+    t = tessellate.displace_mesh(pos, nrm, uvs, faces, constant(0.0), scale, 1.0, 2)
+    return crossing_check(t, base_mesh=base,
+                          other_side=lambda uv: dr.full(mi.Float, -scale, dr.width(uv)))
+
+
+def test_spot_is_flagged_at_its_tail_only(variant):
+    """vdm_spot's reference warns: Spot's tail (the nub at the rear, z > 0.95) is 0.035-0.039
+    thick, less than both walls moving 0.02 inwards.  No false positives elsewhere (ears,
+    horns, a vertex's own neighbourhood): up to 0.0175 per wall nothing is flagged, and the
+    rest of the cow, cast against the whole base, is clean at 0.02 and 0.025."""
+    from pathlib import Path
+
+    from mi_displace.core.mesh_io import load_uv_mesh
+
+    spot = Path(__file__).resolve().parents[2] / "data" / "spot" / "spot_triangulated.obj"
+    pos, nrm, uvs, faces = load_uv_mesh(str(spot))
+    base = (pos, faces, uvs)
+    assert _full_depth_check(pos, nrm, uvs, faces, base, 0.0175)["crossing_vertices"] == 0
+    assert _full_depth_check(pos, nrm, uvs, faces, base, 0.02)["crossing_vertices"] > 0
+    x, y, z = pos[:, 0], pos[:, 1], pos[:, 2]
+    tail = (z > 0.95) & (np.abs(x) < 0.1) & (y > -0.2) & (y < 0.05)   # the nub at the rear
+    body = faces[~np.any(tail[faces], axis=1)]                       # the rest of the cow
+    used, body = np.unique(body, return_inverse=True)
+    body = body.reshape(-1, 3)
+    assert 0.9 * len(faces) < len(body) < len(faces)
+    for scale in (0.02, 0.025):
+        check = _full_depth_check(pos[used], nrm[used], uvs[used], body, base, scale)
+        assert check["crossing_vertices"] == 0, (scale, check)

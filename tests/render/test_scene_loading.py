@@ -99,3 +99,27 @@ def test_bad_input_is_reported_with_the_file(variant, tmp_path):
     scene, _ = scenes.load(path)
     with pytest.raises(ValueError, match="spp"):
         scenes.render(scene, spp=0)
+
+
+def test_compare_can_switch_raster_to_zbuffer_visibility(variant):
+    """``-D approximation_integrator=raster_zbuffer`` picks scenes/integrators/raster_zbuffer.xml:
+    the comparison's approximation side rasterises (the same image as ray-traced visibility,
+    docs/raster.md), and the reference side keeps ``path``."""
+    from pathlib import Path
+
+    from mi_displace.evaluate.compare import protocol_settings
+
+    path = Path(__file__).resolve().parents[2] / "scenes" / "ddm_thorns_sphere.xml"
+    settings = protocol_settings(path, {"approximation_integrator": "raster_zbuffer"})
+    assert settings["approximation_integrator"] == "raster_zbuffer"
+    assert settings["reference_integrator"] == "path" and settings["xml_params"] == {}
+    images = {}
+    for integrator in ("raster", "raster_zbuffer"):
+        scene, _ = scenes.load(path, mode="approximation", integrator=integrator, res=48)
+        images[integrator] = np.asarray(mi.render(scene))
+        assert np.all(np.isfinite(images[integrator]))
+        assert scene.integrator().options.visibility == ("zbuffer" if integrator.endswith("zbuffer")
+                                                         else "raytrace")
+    assert images["raster"].mean() > 0.02
+    differ = np.abs(images["raster_zbuffer"] - images["raster"]).max(axis=2) > 1e-3
+    assert differ.mean() < 0.01, differ.mean()

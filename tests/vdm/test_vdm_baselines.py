@@ -79,3 +79,15 @@ def test_baseline_plugins_depth_zero_and_bad_input(variant, plugin):
     assert np.all(np.isfinite(c)) and np.abs(c - b).max() > 0.01
     with pytest.raises(Exception, match="depth"):
         scene(dict(bsdf, depth=-1.0))
+
+
+@pytest.mark.parametrize("plugin", ["horizon", "relief"])
+def test_baseline_errors_name_their_own_plugin(variant, plugin):
+    own = {"horizon": {"azimuths": 2}, "relief": {"steps": 0}}[plugin]
+    for bad, name in ((own, next(iter(own))), ({"tiling_u": 0}, "tiling_u"),
+                      ({"height": _constant_texture(3.0), "tile_size": 1.0}, "height")):
+        props = dict({"type": plugin, "height": _constant_texture(0.5), "depth": 0.1}, **bad)
+        with pytest.raises(Exception) as caught:
+            mi.load_dict(props)
+        assert f"{plugin}: '{name}'" in str(caught.value), str(caught.value)
+        assert "vdm:" not in str(caught.value)

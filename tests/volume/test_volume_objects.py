@@ -107,3 +107,25 @@ def test_piggy_bank_hides_coins_inside_a_shell(variant):
     assert len(coin) > 0 and shell.min() < coin.min() and coin.max() < shell.max()
     between = profile[shell[shell < coin.min()].max(): coin.min()]
     assert between.min() == 0.0     # hollow: empty space between the shell and the coin
+
+
+def test_grid_and_map_resolutions_have_their_own_minimum_and_limit():
+    """Object grids: sizes >= 1 up to MAX_VOXELS; D_k maps: >= 2 (central differences) up to
+    MAX_MAP_VOXELS; both refuse with the caller's name."""
+    from mi_displace.volume import displacement, objects
+
+    assert objects.check_resolution((1, 5, 2), "grid") == (1, 5, 2)
+    assert displacement.check_resolution([2, 3, 4], "D_k") == (2, 3, 4)
+    with pytest.raises(ValueError, match=r"^D_k: expected three integers >= 2, got \(1, 4, 4\)"):
+        displacement.check_resolution((1, 4, 4), "D_k")
+    with pytest.raises(ValueError, match=r"^grid: expected three positive sizes, got \(0, 4, 4\)"):
+        objects.check_resolution((0, 4, 4), "grid")
+    side = round(displacement.MAX_MAP_VOXELS ** (1 / 3))
+    assert displacement.check_resolution((side,) * 3, "D_k") == (side,) * 3
+    with pytest.raises(ValueError, match=f"more than the limit of {displacement.MAX_MAP_VOXELS:,}"):
+        displacement.check_resolution((side + 1,) * 3, "D_k")
+    assert objects.check_resolution((side + 1,) * 3, "grid") == (side + 1,) * 3
+    with pytest.raises(ValueError, match=f"more than the limit of {objects.MAX_VOXELS:,}"):
+        objects.check_resolution((513, 512, 512), "grid")
+    with pytest.raises(ValueError, match="expected three"):
+        objects.check_resolution((4, 4), "grid")
