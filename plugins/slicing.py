@@ -16,6 +16,7 @@
         <boolean name="ratio_scaling" value="true"/> <!-- §3.4 orthogonal count scaling -->
         <boolean name="draw_base" value="false"/>   <!-- also draw the base polygons (opaque) -->
         <boolean name="rasterise" value="true"/>    <!-- raster: z-buffer the slices (false: walk) -->
+        <boolean name="self_shadows" value="true"/> <!-- false: no walk towards the light -->
         <bsdf type="diffuse"> ... </bsdf>            <!-- its textures are read at the slice uv -->
     </shape>
 
@@ -27,7 +28,8 @@ where none does, so it works under ``raster`` and ``path`` alike.  Under ``raste
 slices of a frame are rasterised by our z-buffer beforehand (``raster_begin``; the α-test
 as a fragment discard, :mod:`mi_displace.slicing.rasterised`) and the BSDF shades the
 fragment that won; ``rasterise=false`` walks them by ray queries as under ``path``.  Self-shadows come from
-the slices themselves (a second slice walk towards the light).  ``build_stats`` reports
+the slices themselves (a second slice walk towards the light; ``self_shadows=false`` leaves
+it out, as the paper's OpenGL drawing does).  ``build_stats`` reports
 the slice counts (what ``auto`` chose), triangles and bytes.
 """
 from __future__ import annotations
@@ -60,6 +62,7 @@ class SlicingBSDF(MesostructureBSDF):
     def __init__(self, props: mi.Properties, model):
         super().__init__(props)
         self.model = model   # a SlicedVolume (or a DepthObject in the subclass)
+        self.self_shadows = bool(props.get("self_shadows", True))
         self._cache = None
 
     def _facing(self, w):
@@ -93,6 +96,8 @@ class SlicingBSDF(MesostructureBSDF):
 
     def _lit(self, state, wo_world):
         hit, normal = state
+        if not self.self_shadows:
+            return dr.full(mi.Bool, True, dr.width(wo_world))
         return ~self.model.occluded(hit, normal, wo_world, hit.found & (dr.dot(normal, wo_world) > 0))
 
     def to_string(self):
@@ -158,6 +163,7 @@ class Slicing(mi.Mesh):
         inner = mi.Properties("slicing")
         inner["height"] = height
         inner["material"] = material
+        inner["self_shadows"] = bool(props.get("self_shadows", True))
         bsdf = SlicingBSDF(inner, volume)
         props[bsdfs[0][0] if bsdfs else "bsdf"] = bsdf
         walls = volume.walls

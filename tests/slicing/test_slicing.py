@@ -136,6 +136,20 @@ def test_grazing_see_through(variant, helpers):
     assert see_through(helpers, "screen") < 0.01
 
 
+def test_self_shadows_off_only_lights_the_shadowed_fragments(variant, helpers):
+    """``self_shadows=false`` (the paper's OpenGL drawing: no walk towards the light) changes
+    exactly the self-shadowed fragments, which with shadows are lit by the ambient term only
+    (albedo x ambient radiance); everything else is bit-identical."""
+    sensor = helpers.look([0, -2.6, 2.6], [0, 0, 0], res=32)
+    on, _ = helpers.render(helpers.plane(slices=32, direction="a"), sensor)
+    off, _ = helpers.render(helpers.plane(slices=32, direction="a", self_shadows=False), sensor)
+    changed = np.abs(off - on).max(-1) > 0
+    assert 5 <= changed.sum() < 0.5 * changed.size
+    assert np.all(off[changed] > on[changed])
+    ambient = 0.1 * np.array(helpers.MATERIAL["reflectance"]["value"])
+    assert np.abs(on[changed] - ambient).max() < 1e-5
+
+
 def test_one_and_4096_slices(variant, helpers):
     vol = plane_volume(0.7, "a", "basic", n=1)
     o, d = rays(100)
