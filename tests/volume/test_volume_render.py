@@ -139,7 +139,8 @@ def test_fast_paths_agree_with_the_slow_ones(variant, monkeypatch):
     reading the D_k everywhere and marching every slice."""
     from mi_displace.volume import slicing
 
-    m = mi.ScalarTransform4f().translate([0.0, -0.5, 0.0]).scale([0.5, 0.5, 0.5])
+    # tilted, so that D has two world components (a one-channel D_k reads without the branch)
+    m = mi.ScalarTransform4f().translate([0.0, -0.5, 0.0]).rotate([1, 0, 0], 20.0).scale([0.5, 0.5, 0.5])
     vol = _volume(maps=[("gaussian", {"amount": 0.6})], map0_to_world=m)
     dk = vol.volume.chain.sampled_maps()[0]
     assert dk.nonzero is not None and 0 < np.array(dk.nonzero).mean() < 1
