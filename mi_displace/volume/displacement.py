@@ -177,10 +177,10 @@ class SampledMap:
         self.nonzero = mi.Float(flags.astype(np.float32).ravel()) if skip else None
         self.flag_cells = flags.shape[::-1]
 
-    def nbytes(self) -> int:
+    def nbytes(self, all_channels: bool = False) -> int:
         """Texture bytes at the stored bit depth: the stored channels of D 3 + α 1 + J 9 +
-        ∇α 3 (at most 16; :class:`ChannelTexture` drops the all-zero ones)."""
-        stored = sum(len(t.stored) for t in (self.disp, self.jac, self.galpha))
+        ∇α 3 (:class:`ChannelTexture` drops the all-zero ones), or all 16 (the full format)."""
+        stored = 16 if all_channels else sum(len(t.stored) for t in (self.disp, self.jac, self.galpha))
         return self.voxels * stored * (self.bits // 8)
 
     def _coords(self, p: mi.Point3f) -> mi.Point3f:
