@@ -169,10 +169,10 @@ class SampledMap:
         # D_k cells whose trilinear reads give exactly D = 0, α = 1, J = 0, ∇α = 0 (the
         # undisplaced part of the map's region, and beyond its faces by clamp-to-edge):
         # lookups there skip the reads (None: no such cell, or a D/α read of one channel, which
-        # costs less than the flag gather and the branch: 1.09-1.19x slower with them on the
-        # bench's Gaussian pull, 0.95x on a 3-channel peel; docs/volume.md)
+        # costs no more than the flag gather and the branch: 1.00-1.19x as slow with them on
+        # the bench's Gaussian pull, 0.81-0.95x on a 3-channel peel; docs/volume.md)
         zero = np.concatenate([d, 1.0 - alpha[..., None], jac.reshape(*shape, 9), galpha], axis=-1)
-        flags = nonzero_cells(np.abs(zero).max(-1) > 0)
+        self.flags = flags = nonzero_cells(np.abs(zero).max(-1) > 0)
         skip = not flags.all() and len(self.disp.stored) > 1
         self.nonzero = mi.Float(flags.astype(np.float32).ravel()) if skip else None
         self.flag_cells = flags.shape[::-1]
