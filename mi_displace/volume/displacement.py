@@ -13,6 +13,10 @@ over the map's support box (node-centred grid, clamp-to-edge addressing):
   exactly);
 * ``galpha``: ∇α_s in world units (3 channels), for eq. 7.
 
+Each texture stores only its channels that are non-zero at some node (:class:`ChannelTexture`),
+and a coarse flag grid (:func:`nonzero_cells`) marks the cells where every channel is zero, so
+lookups there read nothing; both are bit-exact.
+
 A :class:`DisplacementChain` composes maps listed in *forward* order (the first acts on the
 object first): p = G_1(G_2(... G_n(p'))) (eq. 9), so lookups run from the last map to the
 first.  The normal matrix of the chain is B = B_n(p') B_{n-1}(q_{n-1}) ... B_1(q_1) (the chain
@@ -64,9 +68,51 @@ def _grid_points(lo, hi, res) -> tuple[mi.Point3f, np.ndarray]:
     return p, (np.asarray(hi, float) - np.asarray(lo, float)) / (np.array(res) - 1)
 
 
-def _texture(array: np.ndarray) -> mi.Texture3f:
-    return mi.Texture3f(mi.TensorXf(np.ascontiguousarray(array, dtype=np.float32)), use_accel=False,
-                        filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
+#: D_k nodes per axis of one cell of the "D nonzero" flag grid (:func:`nonzero_cells`).
+FLAG_NODES = 2
+
+
+def nonzero_cells(nonzero: np.ndarray) -> np.ndarray:
+    """Per cell of FLAG_NODES D_k nodes a side, whether a trilinear read there may touch a
+    non-zero node.  ``nonzero``: (z, y, x) node mask.  A read at texel position t = u n - 1/2
+    uses nodes floor(t) and floor(t) + 1 (clamped to the grid); with j = clip(floor(t), -1,
+    n - 1) + 1 in [0, n] its cell is j // FLAG_NODES, flagged when any node within one more of
+    the cell's reads is non-zero (a margin against rounding of t).  Returns a (z, y, x) bool
+    array of (n + FLAG_NODES) // FLAG_NODES cells per axis."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    b, flags = FLAG_NODES, nonzero
+    for axis in range(3):
+        n = nonzero.shape[axis]
+        cells = (n + b) // b
+        pad = [(0, 0)] * 3
+        pad[axis] = (2, cells * b + 2 - n)   # node k - 2 at index k; cell c reads nodes [cb - 2, cb + b + 1]
+        window = sliding_window_view(np.pad(flags, pad, mode="edge"), b + 4, axis=axis).any(-1)
+        flags = np.take(window, np.arange(cells) * b, axis=axis)
+    return flags
+
+
+class ChannelTexture:
+    """A trilinear, clamp-to-edge 3-D texture of C channels ((z, y, x, C) array) that stores
+    only its channels that are non-zero at some node: the others read exactly 0 without a
+    gather (a Gaussian pull's D = (0, 0, D_z) and J with one non-zero row are one and three
+    channels, not 4 and 9 — Dr.Jit gathers 2^k channels a node, 9 as 16)."""
+
+    def __init__(self, array: np.ndarray):
+        self.channels = array.shape[-1]
+        self.stored = [c for c in range(self.channels) if np.any(array[..., c] != 0)]
+        self.texture = None if not self.stored else mi.Texture3f(
+            mi.TensorXf(np.ascontiguousarray(array[..., self.stored], dtype=np.float32)), use_accel=False,
+            filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
+
+    def eval(self, u: mi.Point3f, active=True) -> list:
+        """The C channels at texture coordinates u (list of Float)."""
+        zero = dr.zeros(mi.Float, dr.width(u.x))
+        out = [zero] * self.channels
+        if self.texture is not None:
+            for c, v in zip(self.stored, self.texture.eval(u, active)):
+                out[c] = v
+        return out
 
 
 class SampledMap:
@@ -110,19 +156,26 @@ class SampledMap:
         jac = np.einsum("...ij,jk->...ik", dl, lin_inv)
         ga_l = np.stack(np.gradient(alpha, h[2], h[1], h[0])[::-1], axis=-1)
         galpha = np.einsum("...j,jk->...k", ga_l, lin_inv)
-        self.disp = _texture(np.concatenate([d, (1.0 - alpha)[..., None]], axis=-1))
-        self.jac = _texture(jac.reshape(*shape, 9))
-        self.galpha = _texture(galpha)
+        self.disp = ChannelTexture(np.concatenate([d, (1.0 - alpha)[..., None]], axis=-1))
+        self.jac = ChannelTexture(jac.reshape(*shape, 9))
+        self.galpha = ChannelTexture(galpha)
         self.voxels = int(np.prod(res))
-        # axes along which both faces of the grid hold D = 0, α = 1, J = 0, ∇α = 0: beyond
-        # them clamp-to-edge reads give exactly those, so lookups there may skip the reads
+        # D_k cells whose trilinear reads give exactly D = 0, α = 1, J = 0, ∇α = 0 (the
+        # undisplaced part of the map's region, and beyond its faces by clamp-to-edge):
+        # lookups there skip the reads (None: no such cell, or a D/α read of one channel, which
+        # costs no more than the flag gather and the branch: 1.00-1.19x as slow with them on
+        # the bench's Gaussian pull, 0.81-0.95x on a 3-channel peel; docs/volume.md)
         zero = np.concatenate([d, 1.0 - alpha[..., None], jac.reshape(*shape, 9), galpha], axis=-1)
-        self.bounded_axes = [a for a in range(3)
-                             if not np.take(zero, [0, -1], axis=2 - a).any()]
+        self.flags = flags = nonzero_cells(np.abs(zero).max(-1) > 0)
+        skip = not flags.all() and len(self.disp.stored) > 1
+        self.nonzero = mi.Float(flags.astype(np.float32).ravel()) if skip else None
+        self.flag_cells = flags.shape[::-1]
 
-    def nbytes(self) -> int:
-        """Texture bytes at the stored bit depth (D 3 + α 1 + J 9 + ∇α 3 channels)."""
-        return self.voxels * 16 * (self.bits // 8)
+    def nbytes(self, all_channels: bool = False) -> int:
+        """Texture bytes at the stored bit depth: the stored channels of D 3 + α 1 + J 9 +
+        ∇α 3 (:class:`ChannelTexture` drops the all-zero ones), or all 16 (the full format)."""
+        stored = 16 if all_channels else sum(len(t.stored) for t in (self.disp, self.jac, self.galpha))
+        return self.voxels * stored * (self.bits // 8)
 
     def _coords(self, p: mi.Point3f) -> mi.Point3f:
         l = self.placement.to_local(p)
@@ -132,18 +185,18 @@ class SampledMap:
 
     def lookup(self, p: mi.Point3f, normals: bool, active=True, alpha_gradient=True):
         """(D, α_s, Jᵀ or None, ∇α_s or None) at world points p' (world units); lanes outside
-        ``active``, or beyond the grid along a bounded axis, read nothing (D = 0, α = 1, J = 0
-        there)."""
+        ``active``, or in a cell of :func:`nonzero_cells` that is all zero, read nothing
+        (D = 0, α = 1, J = 0 there: bit for bit what the reads would give)."""
         u = self._coords(p)
-        if not self.bounded_axes:
+        if self.nonzero is None:
             return self._read(u, normals, alpha_gradient, active)
-        # beyond a bounded axis' faces (plus half a node) every channel is the clamped face value,
-        # D = 0, α = 1: a symbolic branch skips the reads there (on the LLVM backend too, a
-        # packet of samples with none inside the map's region jumps over it)
-        half = 0.5 / mi.ScalarVector3f(self.res)
-        inside = active
-        for a in self.bounded_axes:
-            inside = inside & (u[a] > -half[a]) & (u[a] < 1 + half[a])
+        # a symbolic branch skips the reads in all-zero cells (on the LLVM backend too, a
+        # packet of samples with none in a displaced cell jumps over it)
+        # the cell of texel position t = u n - 1/2 (nonzero_cells): floor((floor(t) + 1) / b)
+        n, cx, cy = mi.ScalarVector3f(self.res), int(self.flag_cells[0]), int(self.flag_cells[1])
+        c = mi.Vector3u(dr.clip(dr.floor((u * n + 0.5) * (1.0 / FLAG_NODES)), 0.0,
+                                mi.ScalarVector3f(self.flag_cells) - 1.0))
+        inside = active & (dr.gather(mi.Float, self.nonzero, mi.UInt32(c.x + cx * (c.y + cy * c.z)), active) > 0)
         return dr.if_stmt(args=(u,), cond=inside, label="volume_dk_lookup",
                           true_fn=lambda u: self._read(u, normals, alpha_gradient),
                           false_fn=lambda u: self._outside(u, normals, alpha_gradient))
@@ -163,7 +216,7 @@ class SampledMap:
 
     @staticmethod
     def _outside(u, normals, alpha_gradient):
-        """What the grid holds beyond a bounded axis: D = 0, α = 1, J = 0, ∇α = 0."""
+        """What an all-zero cell reads: D = 0, α = 1, J = 0, ∇α = 0."""
         zero = dr.zeros(mi.Float, dr.width(u.x))
         d, alpha = mi.Vector3f(zero), zero + 1.0
         if not normals:

@@ -98,7 +98,8 @@ def test_jacobian_texture_matches_finite_differences(variant):
     l = RNG.uniform(0.25, 0.75, (500, 3))
     pw = _to_world(M_ROT, l)
     _, _, jac, _ = s.lookup(_p(pw), True)
-    J = np.stack([np.array(jac[j][i]) for i in range(3) for j in range(3)], -1).reshape(-1, 3, 3)  # lookup gives Jᵀ
+    # lookup gives Jᵀ; entries that are 0 in every lane (unstored channels) may be one literal lane
+    J = np.stack([np.broadcast_to(np.array(jac[j][i]), 500) for i in range(3) for j in range(3)], -1).reshape(-1, 3, 3)
     h = 1e-3
     fd = np.zeros_like(J)
     for k in range(3):
@@ -198,3 +199,32 @@ def test_proxy_grows_to_contain_displaced_matter(variant):
     pre = _np(r.p)
     inside = ((pre >= 0) & (pre <= 1)).all(1) & (np.array(r.alpha) == 1)
     assert ((pp[inside] >= lo - 1e-6) & (pp[inside] <= hi + 1e-6)).all()
+
+
+def test_sparse_channels_and_zero_cells_read_what_the_full_texture_reads(variant):
+    """ChannelTexture (only non-zero channels stored) reads bit for bit what a texture of all
+    channels reads; every coordinate whose full read is non-zero lies in a flagged cell of
+    nonzero_cells (a block of non-zero nodes in a zero grid, coordinates beyond the faces too)."""
+    from mi_displace.volume.displacement import FLAG_NODES, ChannelTexture, nonzero_cells
+
+    rng = np.random.default_rng(5)
+    shape = (9, 12, 7)                                   # z, y, x nodes
+    a = np.zeros((*shape, 9))
+    a[3:6, 6:9, 2:4] = rng.uniform(-1, 1, (3, 3, 2, 9))
+    a[..., [1, 4, 5]] = 0.0
+    u = mi.Point3f(*(mi.Float(rng.uniform(-0.3, 1.3, 20000)) for _ in range(3)))
+    sparse = ChannelTexture(a)
+    assert sparse.stored == [0, 2, 3, 6, 7, 8]
+    full = mi.Texture3f(mi.TensorXf(a.astype(np.float32)), use_accel=False,
+                        filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp).eval(u)
+    got = sparse.eval(u)
+    assert all(np.array_equal(np.array(x), np.array(y)) for x, y in zip(got, full))
+    flags = nonzero_cells(np.abs(a).max(-1) > 0)
+    assert 0 < flags.mean() < 0.5
+    n = np.array(shape[::-1], float)
+    uu = np.stack([np.array(c) for c in u], -1)
+    c = np.clip(np.floor((uu * n + 0.5) / FLAG_NODES), 0, np.array(flags.shape[::-1]) - 1).astype(int)
+    nonzero = np.abs(np.stack([np.array(x) for x in full], -1)).max(-1) > 0
+    assert 0.01 < nonzero.mean() < 0.5
+    assert flags[c[:, 2], c[:, 1], c[:, 0]][nonzero].all()
+    assert (~flags[c[:, 2], c[:, 1], c[:, 0]]).mean() > 0.3   # and most lanes may skip
