@@ -8,7 +8,9 @@ the base mesh itself, through Mitsuba, vectorised; a hit closer than |d| is a cr
 With the base's UVs and the height, the displacement of the part that is hit counts too
 (both walls of a shell move towards each other).  Parametric bases have a known thickness
 (:meth:`BaseSurface.thickness`), so they need no rays (the other side's motion is not
-counted there).
+counted there).  The rays depend on the base points only (:func:`cast_crossing_rays`, both
+ways along n): a re-displacement of the same topology reuses them and re-evaluates the
+check exactly, without a ray.
 """
 from __future__ import annotations
 
