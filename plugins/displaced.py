@@ -44,7 +44,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.core import dicing, surfaces, tessellate
+from mi_displace.core import dicing, surfaces, tessellate, thickness
 from mi_displace.core.mesh_io import load_uv_mesh
 from mi_displace.core.texture_height import check_texture_finite, height_function
 from mi_displace.core.thickness import crossing_check, crossing_warning
@@ -76,19 +76,6 @@ def _mesh_level(mesh_data, props, edge_length) -> int:
                          f"than the limit of {2 * tessellate.MAX_VERTICES:,}; lower "
                          "'subdivision' or raise 'edge_length'")
     return int(level)
-
-
-def _build(base, mesh_data, grid, height_texture, scale, midlevel) -> tessellate.Tessellation:
-    """Tessellate a parametric (``grid`` = (nu, nv)) or mesh (``grid`` = level) base.
-
-    ``scale`` and ``midlevel`` are floats or ``mi.Float``s (then differentiable)."""
-    if base is not None:
-        nu, nv = grid
-        height = None if height_texture is None else height_function(
-            height_texture, 0.5 / max(nu, nv))
-        return tessellate.displace_parametric(base, height, scale, midlevel, nu, nv)
-    height = None if height_texture is None else height_function(height_texture, 1e-3 / grid)
-    return tessellate.displace_mesh(*mesh_data, height, scale, midlevel, grid)
 
 
 class Displaced(mi.Mesh):
@@ -144,6 +131,12 @@ class Displaced(mi.Mesh):
             mesh_data = load_uv_mesh(props.get("filename"))
             base = None
             grid = None if self.dicing else _mesh_level(mesh_data, props, edge_length)
+            # constant per load (every re-displacement reuses them): position classes, the
+            # interpolated frame, the uniform refinement's topology
+            self._weld = tessellate.weld_classes(mesh_data[0])
+            self._frames = tessellate.vertex_frames(*mesh_data)
+            if not self.dicing:
+                self._topology = tessellate.subdivision_topology(mesh_data[3], self._weld, grid)
         else:
             base = surfaces.make_base(
                 base_name, **{k: float(props.get(k)) for k in BASE_PARAMS.get(base_name, ())
@@ -152,12 +145,12 @@ class Displaced(mi.Mesh):
             grid = None if self.dicing else tessellate.grid_resolution(base, resolution, edge_length)
         self.base, self.mesh_data, self.grid = base, mesh_data, grid
         self.height_texture, self.to_world = height, to_world
+        self._rays = None   # (topology, CrossingRays) of the last crossing check on a mesh
         self.to_world_np = np.array(to_world.matrix, dtype=np.float64)
         self.scale, self.midlevel = mi.Float(scale), mi.Float(midlevel)
         if self.dicing:
             self.dicing_rate, self.offscreen_dicing_scale = mi.Float(rate), mi.Float(off)
             self._cache = {}
-            self._weld = None if mesh_data is None else tessellate.weld_classes(mesh_data[0])
             self._height_range = _height_range(height)
         start = time.perf_counter()
         t, stats = self._build(props.id() or "displaced")
@@ -173,10 +166,21 @@ class Displaced(mi.Mesh):
 
         ``scale`` and ``midlevel`` enter the kernels as the traversed ``mi.Float``s, so a
         gradient enabled on them (or on the height texture's data) reaches the vertices."""
-        if not self.dicing:
-            return _build(self.base, self.mesh_data, self.grid, self.height_texture, self.scale,
-                          self.midlevel), {"mode": "uniform"}
-        return self._dice(name or self.id())
+        if self.dicing:
+            return self._dice(name or self.id())
+        if self.base is not None:
+            nu, nv = self.grid
+            height = None if self.height_texture is None else height_function(
+                self.height_texture, 0.5 / max(nu, nv))
+            t = tessellate.displace_parametric(self.base, height, self.scale, self.midlevel,
+                                               nu, nv)
+        else:
+            height = None if self.height_texture is None else height_function(
+                self.height_texture, 1e-3 / self.grid)
+            t = tessellate.displace_mesh_vertices(*self.mesh_data, *self._topology, height,
+                                                  self.scale, self.midlevel,
+                                                  frames=self._frames)
+        return t, {"mode": "uniform"}
 
     def _dice(self, name: str):
         """Staged dicing: edge rates -> topology (kept if no rate moved) -> vertices."""
@@ -242,7 +246,8 @@ class Displaced(mi.Mesh):
         else:
             pos, nrm, uvs, faces = self.mesh_data
             t = tessellate.displace_mesh_vertices(pos, nrm, uvs, faces, topo.src, topo.bary,
-                                                  topo.groups, topo.faces, height, scale, midlevel)
+                                                  topo.groups, topo.faces, height, scale, midlevel,
+                                                  frames=self._frames)
             segs, patches = edges["seg"], len(faces)
         rebuilt.append("vertices")
         times["displace_s"] = time.perf_counter() - clock
@@ -271,10 +276,7 @@ class Displaced(mi.Mesh):
                              "(check the height texture and 'scale')")
         v, f = t.vertex_count, t.face_count
         tessellate_s = time.perf_counter() - start
-        check = (crossing_check(t, thickness=self.base.thickness()) if self.base is not None
-                 else crossing_check(t, base_mesh=(self.mesh_data[0], self.mesh_data[3],
-                                                   self.mesh_data[2]),
-                                     other_side=self._signed_displacement()))
+        check = self._crossing_check(t)
         messages = list(stats.pop("warnings", []))
         message = crossing_warning(f"displaced {self.id() or '(no id)'!r}", check)
         if message:
@@ -285,6 +287,20 @@ class Displaced(mi.Mesh):
                             "bytes": v * 8 * 4 + f * 3 * 4,
                             "crossing_vertices": check["crossing_vertices"],
                             "warnings": messages}
+
+    def _crossing_check(self, t: tessellate.Tessellation) -> dict:
+        """:func:`crossing_check` of ``t``; on a mesh base the rays (the costly part: a BVH of
+        the base and two rays per vertex) are cast once per topology, so an edit of the
+        displacement re-evaluates the check exactly (the result a fresh load gives) without
+        casting a ray."""
+        if self.base is not None:
+            return crossing_check(t, thickness=self.base.thickness())
+        base_mesh = (self.mesh_data[0], self.mesh_data[3], self.mesh_data[2])
+        topology = self._cache["topology"] if self.dicing else self._topology
+        if self._rays is None or self._rays[0] is not topology:
+            self._rays = (topology, thickness.cast_crossing_rays(t, base_mesh))
+        return crossing_check(t, base_mesh=base_mesh, other_side=self._signed_displacement(),
+                              rays=self._rays[1])
 
     def _signed_displacement(self):
         """callable(uv) -> scale (h(uv) - midlevel), or None without a height."""

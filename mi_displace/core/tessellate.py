@@ -373,7 +373,7 @@ def weld_classes(positions: np.ndarray) -> np.ndarray:
 
 def displace_mesh_vertices(positions, normals, uvs, faces, src: np.ndarray, bary: np.ndarray,
                            group: np.ndarray, new_faces: np.ndarray, height, scale: float,
-                           midlevel: float) -> Tessellation:
+                           midlevel: float, frames: tuple | None = None) -> Tessellation:
     """Displace the vertices of any refinement of a base mesh (:func:`displace_mesh`'s kernel).
 
     Args:
@@ -383,6 +383,8 @@ def displace_mesh_vertices(positions, normals, uvs, faces, src: np.ndarray, bary
             normal (UV-seam twins stay on one point).
         new_faces: (F', 3) triangles over the new vertices.
         height, scale, midlevel: as :func:`displace_parametric`.
+        frames: :func:`vertex_frames` of the base mesh, when already computed (a
+            re-displacement of the same base); computed here when ``None``.
     """
     idx = [mi.UInt32(np.ascontiguousarray(src[:, k], np.uint32)) for k in range(3)]
     wts = [mi.Float(np.ascontiguousarray(bary[:, k], np.float32)) for k in range(3)]
@@ -396,7 +398,8 @@ def displace_mesh_vertices(positions, normals, uvs, faces, src: np.ndarray, bary
 
     base_p = mi.Point3f(interp(positions))
     uv = mi.Point2f(interp(uvs))
-    s_u, s_v, n_u, n_v = (interp(a) for a in vertex_frames(positions, normals, uvs, faces))
+    s_u, s_v, n_u, n_v = (interp(a) for a in (vertex_frames(positions, normals, uvs, faces)
+                                                 if frames is None else frames))
     # between vertex normals that cancel (a crease whose sides share vertices) fall back to
     # the tangent frame's normal, else +z: never a NaN
     n_raw, frame = interp(normals), dr.cross(s_u, s_v)
@@ -411,7 +414,9 @@ def displace_mesh_vertices(positions, normals, uvs, faces, src: np.ndarray, bary
         disp = group_mean(scale * (h - midlevel), groups, n_groups)
         p = base_p + disp * n
     normal = smooth_displaced_normals(n, s_u, s_v, n_u, n_v, disp, grad, scale)
-    normal = dr.normalize(group_mean(normal, groups, n_groups))
+    # seam twins whose normals cancel (a fold of the offset surface) keep n: never a NaN
+    mean = group_mean(normal, groups, n_groups)
+    normal = dr.normalize(dr.select(dr.squared_norm(mean) > 1e-12, mean, n))
     f = mi.Vector3u(*[mi.UInt32(np.ascontiguousarray(new_faces[:, k], np.uint32))
                       for k in range(3)])
     return Tessellation(positions=p, normals=normal, texcoords=uv, faces=f,

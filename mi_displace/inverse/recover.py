@@ -74,7 +74,13 @@ def scene_dict(height: np.ndarray, views: int = 3, image_size: int = 64, spp: in
     ``views`` cameras (``sensor0``...; ``grazing_deg``: their elevation, default 55), lit by
     directional light ``light`` of :data:`LIGHTS` alone (one light per scene: no light
     selection noise; the recovery renders every view under each light, as in photometric
-    stereo).  ``resolution``: tessellation cells per side (default 2 per texel)."""
+    stereo).  ``resolution``: tessellation cells per side (default 2 per texel).
+
+    ``grazing_deg`` with ``views`` 1 is a ValueError: the single view is the top one, which
+    has no elevation to set."""
+    if views == 1 and grazing_deg is not None:
+        raise ValueError(f"'grazing_deg' ({grazing_deg}) needs 'views' >= 2: the single view "
+                         "looks straight down and has no elevation to set")
     n = height.shape[0]
     resolution = 2 * n if resolution is None else resolution
     surface = {"type": "displaced", "base": "plane", "resolution": int(resolution),

@@ -37,3 +37,13 @@ def test_bad_input_is_refused(variant, tmp_path):
         recover.recover(np.zeros((4, 4)), iterations=1, lights=3)
     with pytest.raises(ValueError, match="iterations"):
         recover.recover(np.zeros((4, 4)), iterations=0)
+    with pytest.raises(ValueError, match="grazing_deg"):   # one view: the top one
+        recover.scene_dict(np.zeros((4, 4)), views=1, grazing_deg=10.0)
+
+
+def test_grazing_deg_sets_the_cameras_elevation(variant):
+    d = recover.scene_dict(np.zeros((4, 4)), views=2, grazing_deg=10.0)
+    for key in ("sensor0", "sensor1"):
+        origin = np.asarray(d[key]["to_world"].matrix)[:3, 3]
+        elevation = np.degrees(np.arcsin(origin[2] / np.linalg.norm(origin)))
+        assert elevation == pytest.approx(10.0, abs=1e-3)

@@ -148,6 +148,41 @@ def test_mesh_reference_at_zero_height_renders_like_the_smooth_base(variant, tmp
     assert error < 0.05 * facet_error, (error, facet_error)
 
 
+def test_edits_reuse_the_crossing_rays_and_still_warn(variant, tmp_path, monkeypatch):
+    """The thin-shell check casts its rays once per load: an edit within the checked depth
+    casts none and stays silent; an edit deepening the displacement through the 0.015 wall
+    casts none either and warns with the count a fresh load gives; the edited buffers are
+    a fresh load's."""
+    import warnings
+
+    from mi_displace.core import thickness
+    from tests.core.test_thickness import shell_mesh
+
+    write_obj(tmp_path / "shell.obj", *shell_mesh())
+    casts, cast = [], thickness.cast_crossing_rays
+    monkeypatch.setattr(thickness, "cast_crossing_rays",
+                        lambda *a: casts.append(1) or cast(*a))
+    common = {"filename": str(tmp_path / "shell.obj"), "subdivision": 2, "midlevel": 1.0,
+              "height": {"type": "ripples"}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        shape = displaced(id="thin", scale=0.006, **common)
+        params = mi.traverse(shape)
+        params["scale"] = 0.003
+        params.update()
+    assert len(casts) == 1 and shape.build_stats["crossing_vertices"] == 0
+    with pytest.warns(UserWarning, match="displaced 'thin'.*thickness"):
+        params["scale"] = 0.03
+        params.update()
+    assert len(casts) == 1
+    with pytest.warns(UserWarning, match="thickness"):
+        fresh = displaced(id="thin", scale=0.03, **common)
+    assert shape.build_stats["crossing_vertices"] == fresh.build_stats["crossing_vertices"] > 0
+    edited, loaded = buffers(shape), buffers(fresh)
+    for a, b in zip(edited, loaded):
+        assert np.all(np.isfinite(a)) and np.allclose(a, b, atol=1e-6)
+
+
 def test_thin_shell_warning_reaches_compare_metrics(variant, tmp_path):
     """Issue 12.3: inward displacement of 0.03 through a 0.015 shell warns, naming the shape,
     and `compare` lists the warning in metrics.json; 0.01 stays silent."""
@@ -213,3 +248,17 @@ def test_render_explain_prints_build_stats_per_shape(variant, tmp_path, capsys):
     assert text.count("dicing_rate: 2") == 2 and "faces:" in text and "sensors: 1" in text
     assert out.is_file()
     assert cli.main(["render", str(tmp_path / "s.xml"), "--explain"]) == 0  # explain only
+
+
+def test_seam_twins_of_a_folded_offset_keep_a_finite_normal(variant):
+    """Displacing the bunny's low-poly (UV seams) by a uniform 0.002 folds the offset surface
+    where two seam twins' normals cancel: their shared normal falls back to the base's n
+    instead of NaN (a fresh load and an edit both refused the shape before)."""
+    from mi_displace.inverse import bunny
+
+    scale = bunny.baked_map(64)[2]   # 2 max_distance: 0.0500 (the recovery's model)
+    shape = mi.load_dict(bunny._model(np.full((64, 64), 0.54, np.float32), scale))
+    for a in buffers(shape):
+        assert np.all(np.isfinite(a))
+    normals = buffers(shape)[2]
+    assert np.allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-4)
