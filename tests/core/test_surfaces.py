@@ -1,4 +1,5 @@
 """Base surfaces: derivatives and curvatures against finite differences and closed forms."""
+import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
@@ -97,3 +98,60 @@ def test_unknown_base_and_bad_parameters():
         surfaces.Sphere(radius=-1)
     with pytest.raises(ValueError, match="major_radius"):
         surfaces.Torus(major_radius=0.3, minor_radius=0.5)
+
+
+# ---------------------------------------------------------------------------------------
+# Mutants that survived the tests above: every base is parametrised along its lines of
+# curvature (F = 0 and b12 = 0), so the off-diagonal terms of the shape operator were never
+# exercised.  A graph surface z = f(x, y) over a sheared (u, v) grid has neither.
+
+
+def graph_sample(u, v):
+    """S(u, v) = (x, y, f(x, y)), x = u + 0.3 v - 0.5, y = 0.8 v - 0.4, with
+    f = 0.3 x^2 + 0.5 x y - 0.2 y^2 + 0.1 x^3; exact derivatives (NumPy, float64).
+    Returns the SurfaceSample and (f_x, f_y, f_xx, f_xy, f_yy, w = |(-f_x, -f_y, 1)|)."""
+    x, y = u + 0.3 * v - 0.5, 0.8 * v - 0.4
+    fx, fy = 0.6 * x + 0.5 * y + 0.3 * x**2, 0.5 * x - 0.4 * y
+    fxx, fxy, fyy = 0.6 + 0.6 * x, np.full_like(x, 0.5), np.full_like(x, -0.4)
+    m = np.stack([-fx, -fy, np.ones_like(x)])
+    w = np.linalg.norm(m, axis=0)
+    n = m / w
+    xu, yu, xv, yv = 1.0, 0.0, 0.3, 0.8
+
+    def dn(xd, yd):
+        md = np.stack([-(fxx * xd + fxy * yd), -(fxy * xd + fyy * yd), np.zeros_like(x)])
+        return (md - n * np.sum(n * md, 0)) / w
+
+    vec = lambda a: mi.Vector3f(*(mi.Float(c.astype(np.float32)) for c in a))
+    one, zero = np.ones_like(x), np.zeros_like(x)
+    s = surfaces.SurfaceSample(
+        p=mi.Point3f(vec(np.stack([x, y, 0.3 * x**2 + 0.5 * x * y - 0.2 * y**2 + 0.1 * x**3]))),
+        dp_du=vec(np.stack([xu * one, yu * one, fx * xu + fy * yu])),
+        dp_dv=vec(np.stack([xv * one, yv * one, fx * xv + fy * yv])),
+        n=vec(n), dn_du=vec(dn(xu, yu)), dn_dv=vec(dn(xv, yv)))
+    return s, (fx, fy, fxx, fxy, fyy, w)
+
+
+def test_principal_curvatures_of_a_skew_parametrised_graph(variant):
+    """Closed-form mean and Gaussian curvature of a graph (do Carmo §3.3), with this module's
+    sign (kappa > 0 bending away from n): kappa = -(H +- sqrt(H^2 - K))."""
+    g = np.linspace(0.05, 0.95, 15)
+    u, v = (a.ravel() for a in np.meshgrid(g, g))
+    s, (fx, fy, fxx, fxy, fyy, w) = graph_sample(u, v)
+    assert np.abs(np.asarray(dr.dot(s.dp_du, s.dp_dv))).min() > 0.05   # F != 0 everywhere
+    k_max, k_min, d_max, d_min = (np.asarray(a) for a in surfaces.principal_curvatures(s))
+    H = ((1 + fy**2) * fxx - 2 * fx * fy * fxy + (1 + fx**2) * fyy) / (2 * w**3)
+    K = (fxx * fyy - fxy**2) / w**4
+    root = np.sqrt(H**2 - K)
+    assert root.min() > 0.05                                           # no umbilic
+    assert np.allclose(k_max, -(H - root), atol=2e-5)
+    assert np.allclose(k_min, -(H + root), atol=2e-5)
+    n = np.asarray(s.n)
+    for d, k in ((d_max, k_max), (d_min, k_min)):
+        assert np.allclose(np.linalg.norm(d, axis=0), 1, atol=1e-5)
+        assert np.abs(np.sum(d * n, 0)).max() < 1e-5                   # tangent
+        # normal curvature along d from the second fundamental form in (x, y)
+        dx, dy = d[0], d[1]
+        assert np.allclose(-(fxx * dx**2 + 2 * fxy * dx * dy + fyy * dy**2) / w, k, atol=5e-5)
+    # (d_max, d_min, n) is a right-handed orthonormal frame: d_min = n x d_max
+    assert np.allclose(np.sum(np.cross(d_max.T, d_min.T) * n.T, 1), 1, atol=1e-5)
