@@ -155,3 +155,59 @@ def test_principal_curvatures_of_a_skew_parametrised_graph(variant):
         assert np.allclose(-(fxx * dx**2 + 2 * fxy * dx * dy + fyy * dy**2) / w, k, atol=5e-5)
     # (d_max, d_min, n) is a right-handed orthonormal frame: d_min = n x d_max
     assert np.allclose(np.sum(np.cross(d_max.T, d_min.T) * n.T, 1), 1, atol=1e-5)
+
+
+@pytest.mark.parametrize("name", BASES)
+def test_extent_is_the_longest_isoparametric_curve(variant, name):
+    """extent() against the length of the u- and v-curves measured as fine polylines,
+    the longest over a sweep of the other parameter."""
+    base = surfaces.make_base(name, **BASES[name])
+    t = np.linspace(0, 1, 2001)
+    other = np.linspace(0, 1, 41)
+    lengths = []
+    for axis in (0, 1):
+        a, b = np.meshgrid(t, other)                   # a runs along the curve
+        u, v = (a, b) if axis == 0 else (b, a)
+        p = np.asarray(base.sample(mi.Float(u.ravel()), mi.Float(v.ravel())).p).reshape(3, 41, -1)
+        lengths.append(np.linalg.norm(np.diff(p, axis=2), axis=0).sum(1).max())
+    assert np.allclose(base.extent(), lengths, rtol=1e-4)
+
+
+@pytest.mark.parametrize("name", BASES)
+def test_curvature_bounds_are_attained(variant, name):
+    """curvature_bounds() is the exact (min, max) of the principal curvatures, attained on
+    the grid (the torus's inner equator v = 1/2 is a grid row)."""
+    base = surfaces.make_base(name, **BASES[name])
+    s = base.sample(*uv_grid())
+    k_max, k_min, _, _ = surfaces.principal_curvatures(s)
+    assert np.allclose(base.curvature_bounds(), (np.asarray(k_min).min(), np.asarray(k_max).max()),
+                       atol=1e-4)
+
+
+def test_thickness_is_the_distance_through_the_solid():
+    """Along -n from a point of the surface to the other side: the diameter of a sphere or
+    a cylinder, the tube's diameter for a torus; a plane has no other side."""
+    assert surfaces.Sphere(1.3).thickness() == 2.6
+    assert surfaces.Cylinder(0.7, 2.0).thickness() == 1.4
+    assert surfaces.Torus(1.0, 0.35).thickness() == 0.7
+    assert surfaces.Plane().thickness() == float("inf")
+
+
+def test_each_invalid_parameter_is_named():
+    cases = [
+        (lambda: surfaces.Sphere(radius=0), r"^sphere: 'radius' must be > 0, got 0$"),
+        (lambda: surfaces.Cylinder(radius=-1), r"^cylinder: 'radius' must be > 0, got -1$"),
+        (lambda: surfaces.Cylinder(length=0), r"^cylinder: 'length' must be > 0, got 0$"),
+        (lambda: surfaces.Torus(minor_radius=0), r"^torus: 'minor_radius' must be > 0, got 0$"),
+        (lambda: surfaces.Torus(1.0, 1.0), r"^torus: 'major_radius' \(1.0\) must exceed "
+                                           r"'minor_radius' \(1.0\) for a ring torus$"),
+        (lambda: surfaces.make_base("cube"), r"^unknown base 'cube'; expected one of cylinder, "
+                                             r"plane, sphere, torus or 'mesh'$"),
+        (lambda: surfaces.make_base("sphere", radius=1, size=2),
+         r"^base 'sphere': bad parameters \['radius', 'size'\]: .*'size'"),
+    ]
+    for make, message in cases:
+        with pytest.raises(ValueError, match=message):
+            make()
+    # the limits themselves are allowed just inside
+    surfaces.Sphere(1e-6), surfaces.Cylinder(1e-6, 1e-6), surfaces.Torus(1.0 + 1e-6, 1.0)

@@ -134,11 +134,16 @@ def test_mesh_displacement_welds_uv_seams(variant):
 def test_grid_resolution_validation():
     s = surfaces.Sphere(1.0)
     for bad in (0, -3, 2.5):
-        with pytest.raises(ValueError, match="resolution"):
+        with pytest.raises(ValueError, match=rf"^displaced: 'resolution' must be a positive "
+                                             rf"integer, got {bad}$"):
             tessellate.grid_resolution(s, bad)
-    with pytest.raises(ValueError, match="edge_length"):
-        tessellate.grid_resolution(s, edge_length=0.0)
-    with pytest.raises(ValueError, match="exceeds"):
+    for bad in (0.0, -1.0, float("inf")):
+        with pytest.raises(ValueError, match=rf"^displaced: 'edge_length' must be a positive "
+                                             rf"number, got {bad}$"):
+            tessellate.grid_resolution(s, edge_length=bad)
+    with pytest.raises(ValueError, match=r"^displaced: a 200000 x 100000 grid \(20,000,300,001 "
+                                         r"vertices\) exceeds the limit of [0-9,]+ vertices; "
+                                         r"lower 'resolution' or raise 'edge_length'$"):
         tessellate.grid_resolution(s, 200_000)
     nu, nv = tessellate.grid_resolution(s, edge_length=0.1)
     assert nu == int(np.ceil(2 * np.pi / 0.1)) and nv == int(np.ceil(np.pi / 0.1))
@@ -218,3 +223,85 @@ def test_mesh_crease_with_cancelling_vertex_normals_stays_finite(variant):
     faces = np.array([[0, 1, 2], [1, 3, 2]])
     t = tessellate.displace_mesh(pos, nrm, uvs, faces, ripple, 0.05, 0.5, 4)
     assert np.all(np.isfinite(np.asarray(t.positions))) and np.all(np.isfinite(np.asarray(t.normals)))
+
+
+# ---------------------------------------------------------------------------------------
+# Mutants that survived the tests above (scripts/mutation.sh, docs/testing.md).
+
+
+def test_grid_resolution_keeps_the_aspect_and_the_closed_minimums():
+    """nv = ceil(nu extent_v / extent_u); at least 3 cells around a periodic direction and
+    2 between poles (fewer cannot close the surface); the default is 64 cells along u."""
+    sphere, torus, plane = surfaces.Sphere(1.0), surfaces.Torus(1.0, 0.3), surfaces.Plane()
+    assert tessellate.grid_resolution(sphere, 24) == (24, 12)         # extents 2 pi : pi
+    assert tessellate.grid_resolution(sphere) == (64, 32)
+    assert tessellate.grid_resolution(torus, 26) == (26, 6)           # ceil(26 * 0.6 / 2.6)
+    assert tessellate.grid_resolution(plane, 1) == (1, 1)
+    assert tessellate.grid_resolution(sphere, 1) == (3, 2)
+    assert tessellate.grid_resolution(torus, 1) == (3, 3)
+    assert tessellate.grid_resolution(surfaces.Cylinder(1.0, 0.1), 1) == (3, 1)
+    assert tessellate.grid_resolution(plane, edge_length=0.5) == (4, 4)
+    assert tessellate.grid_resolution(plane, edge_length=0.3) == (7, 7)  # ceil(2 / 0.3)
+    assert tessellate.grid_resolution(sphere, edge_length=100.0) == (3, 2)
+    # the vertex limit bounds (nu + 1)(nv + 1): the largest square grid under it passes
+    n = int(np.floor(np.sqrt(tessellate.MAX_VERTICES))) - 1
+    assert tessellate.grid_resolution(plane, n) == (n, n)
+    with pytest.raises(ValueError, match=f"limit of {tessellate.MAX_VERTICES:,} vertices"):
+        tessellate.grid_resolution(plane, n + 1)
+    assert isinstance(tessellate.MAX_VERTICES, int)  # a count, printed as one
+
+
+def test_sphere_poles_take_the_ring_mean_height_and_the_base_normal(variant):
+    """h = 0.2 + 0.5 v + 0.3 cos(2 pi u): the ring mean is 0.2 at the north pole (v = 0,
+    +z) and 0.7 at the south pole; each pole row collapses onto one displaced point."""
+    def h(uv):
+        c, s = dr.cos(dr.two_pi * uv.x), dr.sin(dr.two_pi * uv.x)
+        return 0.2 + 0.5 * uv.y + 0.3 * c, mi.Vector2f(-0.3 * dr.two_pi * s, 0.5)
+    r, scale, mid, nu, nv = 1.5, 0.4, 0.1, 12, 6
+    t = tessellate.displace_parametric(surfaces.Sphere(r), h, scale, mid, nu, nv)
+    assert t.vertex_count == (nu + 1) * (nv + 1) == dr.width(t.normals)
+    assert t.face_count == 2 * nu * nv - 2 * nu == dr.width(t.faces)
+    p, n = np.asarray(t.positions).T, np.asarray(t.normals).T
+    north, south = slice(0, nu + 1), slice(nv * (nu + 1), None)
+    assert np.allclose(p[north], [0, 0, r + scale * (0.2 - mid)], atol=1e-6)
+    assert np.allclose(p[south], [0, 0, -(r + scale * (0.7 - mid))], atol=1e-6)
+    assert np.allclose(n[north], [0, 0, 1], atol=1e-6)
+    assert np.allclose(n[south], [0, 0, -1], atol=1e-6)
+    disp = np.asarray(t.displacement)
+    assert np.allclose(disp[north], scale * (0.2 - mid), atol=1e-6)
+    assert np.allclose(disp[south], scale * (0.7 - mid), atol=1e-6)
+    assert np.allclose(np.asarray(t.base_positions).T[north], [0, 0, r], atol=1e-6)
+
+
+def test_face_weighted_normals_against_numpy():
+    """Area-weighted vertex normals (sum of the faces' edge cross products over each
+    position class), against a NumPy loop over faces; a vertex whose faces have no area
+    keeps its fallback."""
+    mi.set_variant("llvm_ad_rgb")
+    rng = np.random.default_rng(3)
+    box = trimesh.creation.box()
+    pos = box.vertices[box.faces].reshape(-1, 3) + 0.05 * rng.normal(size=(36, 3))
+    faces = np.arange(36).reshape(-1, 3)
+    groups = trimesh.grouping.group_rows(np.round(box.vertices[box.faces].reshape(-1, 3), 6),
+                                         require_count=None)
+    cls = np.zeros(36, np.int64)
+    for k, g in enumerate(groups):
+        cls[g] = k
+    # one extra degenerate triangle on its own class
+    pos = np.vstack([pos, [[2, 2, 2]] * 3])
+    faces = np.vstack([faces, [[36, 37, 38]]])
+    cls = np.concatenate([cls, [len(groups)] * 3])
+    expected = np.zeros((len(groups) + 1, 3))
+    for f in faces:
+        fn = np.cross(pos[f[1]] - pos[f[0]], pos[f[2]] - pos[f[0]])
+        for v in f:
+            expected[cls[v]] += fn
+    expected = expected[cls]
+    norm = np.linalg.norm(expected, axis=1, keepdims=True)
+    fallback = np.tile([0.0, 0.6, 0.8], (len(pos), 1))
+    expected = np.where(norm > 0, expected / np.where(norm > 0, norm, 1), fallback)
+    vec = lambda a, t: t(*(mi.Float(c) for c in a.T.astype(np.float32)))
+    got = tessellate.face_weighted_normals(
+        vec(pos, mi.Point3f), mi.Vector3u(*(mi.UInt32(c.astype(np.uint32)) for c in faces.T)),
+        mi.UInt32(cls.astype(np.uint32)), len(groups) + 1, vec(fallback, mi.Vector3f))
+    assert np.allclose(np.asarray(got).T, expected, atol=1e-5)
