@@ -5,6 +5,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial import Delaunay
 
 from mi_displace.core import surfaces, tessellate
 
@@ -305,3 +306,38 @@ def test_face_weighted_normals_against_numpy():
         vec(pos, mi.Point3f), mi.Vector3u(*(mi.UInt32(c.astype(np.uint32)) for c in faces.T)),
         mi.UInt32(cls.astype(np.uint32)), len(groups) + 1, vec(fallback, mi.Vector3f))
     assert np.allclose(np.asarray(got).T, expected, atol=1e-5)
+
+
+def test_vertex_frames_are_exact_for_linear_fields():
+    """Positions, normals and UVs all affine on a jittered planar triangulation: every
+    triangle has the same Jacobians, so each vertex gets them exactly, S_u = first column of
+    (d uv / d xy)^-1 and n_u its image under the normal field's matrix, projected onto the
+    tangent plane of the unit normal.  A triangle with a degenerate UV map adds nothing."""
+    rng = np.random.default_rng(1)
+    g = np.linspace(0, 1, 6)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    x, y = x + 0.03 * rng.normal(size=x.size), y + 0.03 * rng.normal(size=y.size)
+    faces = Delaunay(np.stack([x, y], 1)).simplices
+    pos = np.stack([x, 0.5 * x + y, 0.2 * x - 0.3 * y], 1)            # an affine sheet
+    A = np.array([[0.8, 0.3], [-0.2, 1.1]])                           # uv = A (x, y) + b
+    uvs = np.stack([x, y], 1) @ A.T + [0.1, -0.2]
+    M = np.array([[0.4, -0.1], [0.2, 0.3], [0.05, -0.15]])            # m = M (x, y) + c
+    nrm = np.stack([x, y], 1) @ M.T + [0.1, 0.2, 1.0]
+    # a triangle of real area whose UVs are collinear (vertex 36 off the sheet, its uv
+    # midway between those of vertices 0 and 1): it must not dilute their average
+    pos = np.vstack([pos, [[0.3, 0.2, 1.0]]])
+    nrm = np.vstack([nrm, [[0, 0, 1]]])
+    uvs = np.vstack([uvs, [0.5 * (uvs[0] + uvs[1])]])
+    faces = np.vstack([faces, [[0, 1, 36]]])
+    s_u, s_v, n_u, n_v = tessellate.vertex_frames(pos, nrm, uvs, faces)
+    Ainv = np.linalg.inv(A)                                           # d xy / d uv
+    dP = np.array([[1, 0], [0.5, 1], [0.2, -0.3]]) @ Ainv             # columns: S_u, S_v
+    dm = M @ Ainv
+    unit = nrm[:36] / np.linalg.norm(nrm[:36], axis=1, keepdims=True)
+    for got, col in ((s_u, dP[:, 0]), (s_v, dP[:, 1])):
+        assert np.allclose(got[:36], col, atol=1e-5)
+    for got, col in ((n_u, dm[:, 0]), (n_v, dm[:, 1])):
+        expect = col - np.sum(col * unit, 1, keepdims=True) * unit
+        assert np.allclose(got[:36], expect, atol=1e-5)
+    for a in (s_u, s_v, n_u, n_v):                # vertex 36 has no valid triangle
+        assert np.all(a[36] == 0)
