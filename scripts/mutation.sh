@@ -12,9 +12,11 @@
 # and several modules can run side by side from separate shells).  Each mutant runs only
 # the module's TESTS (a quoted, space-separated pytest selection; default: the module's
 # row in SELECTION below) with `pytest -x`, on llvm_ad_rgb, under `nice -n 15`, without
-# bytecode caching (a stale .pyc of the previous mutant would otherwise be tested instead).
-# --resume keeps the module's mutmut cache and refreshes only tests/ from HEAD: mutmut
-# keeps the killed mutants and retests the others (commit new tests first).
+# bytecode caching (a stale .pyc of the previous mutant would otherwise be tested instead)
+# and without the suite's full garbage collection between tests (scripts/mutation_nogc.py).
+# --resume keeps the module's mutmut cache and refreshes the tree from HEAD (also undoing
+# the mutant of a run that was stopped): mutmut keeps the killed mutants and, the tests
+# having changed, retests the survivors, then goes on with the untested (commit first).
 # The run stops after --minutes (default 60, shared by all modules of one call) and
 # prints per module: mutants, killed, survived, timed out, untested, score, run time.
 # --show prints each mutant's changed line (scripts/mutation_cache.py).  Never run
@@ -36,7 +38,8 @@ declare -A SELECTION=(
 )
 
 root=$PWD
-export PYTHONDONTWRITEBYTECODE=1 MI_DISPLACE_TEST_VARIANTS=llvm_ad_rgb PATH="$root/.venv/bin:$PATH"
+export PYTHONDONTWRITEBYTECODE=1 MI_DISPLACE_TEST_VARIANTS=llvm_ad_rgb PATH="$root/.venv/bin:$PATH" \
+    PYTHONPATH="$root/scripts"
 dir_of() { echo "out/mutation/$(echo "${1#mi_displace/}" | tr / _ | sed 's/\.py$//')"; }
 
 minutes=60 resume=0 report=0
@@ -71,7 +74,7 @@ if [ $report = 0 ]; then
   for module in "${modules[@]}"; do
     work=$(dir_of "$module")
     if [ $resume = 1 ] && [ -e "$work/.mutmut-cache" ]; then
-      rm -rf "$work/tests" && git archive HEAD tests | tar -x -C "$work"
+      rm -rf "$work/tests" && git archive HEAD | tar -x -C "$work"
     else
       rm -rf "$work" && mkdir -p "$work"
       git archive HEAD | tar -x -C "$work"
@@ -85,7 +88,7 @@ if [ $report = 0 ]; then
     start=$(date +%s)
     (cd "$work" && timeout "$left" nice -n 15 mutmut run --paths-to-mutate "$module" \
         --tests-dir tests --simple-output --no-progress \
-        --runner "python -m pytest -x -q -p no:cacheprovider ${TESTS[$module]}" > mutmut.log 2>&1) || true
+        --runner "python -m pytest -x -q -p no:cacheprovider -p mutation_nogc ${TESTS[$module]}" > mutmut.log 2>&1) || true
     echo $(( $(cat "$work/SECONDS") + $(date +%s) - start )) > "$work/SECONDS"
     grep -q "^Traceback" "$work/mutmut.log" && echo "mutmut failed: see $work/mutmut.log" >&2
   done

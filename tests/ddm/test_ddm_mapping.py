@@ -215,3 +215,16 @@ def test_extreme_scales_stay_finite_and_relative(variant, radius):
     z = np.tile(m.tiles[0].positions[:, 2], m.layout.count)
     rel = np.linalg.norm(P, axis=1) / radius - (1 + 0.05 * z)
     assert np.abs(rel).max() < 2e-3          # same relative accuracy at every scale
+
+
+# ---------------------------------------------------------------------------------------
+# Mutants that survived the tests above (scripts/mutation.sh, docs/testing.md).
+
+
+def test_mode_aliases_follow_the_comparison_convention():
+    """$mode reference/approximation (README scene convention) is exact/maps."""
+    assert DDMConfig(mode="reference").check().mode == "exact"
+    assert DDMConfig(mode="approximation").check().mode == "maps"
+    assert DDMConfig(mode="exact").check().mode == "exact"
+    with pytest.raises(ValueError, match="unknown 'mode' 'approx'"):
+        DDMConfig(mode="approx").check()
