@@ -211,3 +211,45 @@ def test_each_invalid_parameter_is_named():
             make()
     # the limits themselves are allowed just inside
     surfaces.Sphere(1e-6), surfaces.Cylinder(1e-6, 1e-6), surfaces.Torus(1.0 + 1e-6, 1.0)
+
+
+@pytest.mark.parametrize("name", BASES)
+def test_domain_flags_and_names_match_the_geometry(variant, name):
+    """periodic_u / periodic_v: S(0, v) == S(1, v) (resp. in v); poles: the rows v = 0 and
+    v = 1 are single points; each class is registered under its own name."""
+    base = surfaces.make_base(name, **BASES[name])
+    t = mi.Float(np.linspace(0.1, 0.9, 9))
+    zero, one = dr.zeros(mi.Float, 9), dr.full(mi.Float, 1.0, 9)
+    def same(a, b):
+        return np.allclose(np.asarray(base.sample(*a).p), np.asarray(base.sample(*b).p), atol=1e-5)
+    assert base.periodic_u == same((zero, t), (one, t))
+    assert base.periodic_v == same((t, zero), (t, one))
+    rows = [np.asarray(base.sample(t, c).p) for c in (zero, one)]
+    assert base.poles == all(np.ptp(r, axis=1).max() < 1e-6 for r in rows)
+    assert base.name == name and type(base) is surfaces.BASES[name]
+
+
+@pytest.mark.parametrize("radius", [1e-3, 1.0, 1e3])
+def test_umbilic_directions_are_s_u_and_n_cross_s_u(variant, radius):
+    """Every direction is principal at an umbilic; the documented choice is S_u, n x S_u,
+    at any scale (the umbilic test is relative to the first fundamental form)."""
+    for base in (surfaces.Sphere(radius), surfaces.Plane()):
+        s = base.sample(*uv_grid(9))
+        _, _, d_max, d_min = (np.asarray(a) for a in surfaces.principal_curvatures(s))
+        su = np.asarray(s.dp_du) / np.linalg.norm(np.asarray(s.dp_du), axis=0)
+        assert np.allclose(d_max, su, atol=1e-5)
+        assert np.allclose(d_min, np.cross(np.asarray(s.n).T, su.T).T, atol=1e-5)
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])
+def test_principal_directions_do_not_depend_on_the_units(variant, scale):
+    """A torus in any unit: kappa_max = 1 / r along the tube (S_v), kappa_min along the ring
+    (S_u).  (The umbilic test once compared a unitless |d|^2 with (E + G)^2 [length^4]: in
+    metres-sized scenes given in millimetres every point was taken for an umbilic.)"""
+    base = surfaces.Torus(1.0 * scale, 0.4 * scale)
+    s = base.sample(*uv_grid(9))
+    k_max, _, d_max, d_min = (np.asarray(a) for a in surfaces.principal_curvatures(s))
+    assert np.allclose(k_max * scale, 1 / 0.4, rtol=1e-5)
+    for d, t in ((d_max, s.dp_dv), (d_min, s.dp_du)):
+        t = np.asarray(t) / np.linalg.norm(np.asarray(t), axis=0)
+        assert np.allclose(np.abs(np.sum(d * t, 0)), 1, atol=1e-5)
