@@ -4,6 +4,8 @@ import warnings
 import numpy as np
 import pytest
 
+from mi_displace.core import tessellate
+from mi_displace.ddm import mapping
 from mi_displace.ddm import normals as nrm
 from mi_displace.ddm.animation import Animation
 from mi_displace.ddm.model import DDMConfig, DDMModel, FoldingWarning
@@ -228,3 +230,47 @@ def test_mode_aliases_follow_the_comparison_convention():
     assert DDMConfig(mode="exact").check().mode == "exact"
     with pytest.raises(ValueError, match="unknown 'mode' 'approx'"):
         DDMConfig(mode="approx").check()
+
+
+def _face_normals(P, faces):
+    fn = np.cross(P[faces[:, 1]] - P[faces[:, 0]], P[faces[:, 2]] - P[faces[:, 0]])
+    return fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-30)
+
+
+@pytest.mark.parametrize("base, params", [
+    ("sphere", {"radius": 0.1}),                 # (S_u x S_v) . n < 0, tiles at both poles
+    ("cylinder", {"radius": 0.1, "length": 0.5}),  # (S_u x S_v) . n = 2 pi r L > 0, below 1
+])
+def test_tiles_face_outwards_on_small_bases_up_to_the_poles(variant, base, params):
+    """The orientation sign is that of (S_u x S_v) . n whatever its size, taken inside each
+    tile (a sphere's first and last tile rows touch the poles, beyond which the
+    parametrisation mirrors): the tops of the stones face away from the axis, and every
+    row's faces are wound like its normals."""
+    m = _model(base=base, base_params=params, tile="stone:1", tiles_u=8, tiles_v=4,
+               height=0.02, mode="exact")
+    for method in ("tangent", "jacobian"):
+        p, n, _ = m.map(method=method)
+        P, N = _np(p), _np(n)
+        radial = P if base == "sphere" else P * [1, 1, 0]
+        radial = radial / np.linalg.norm(radial, axis=1, keepdims=True)
+        tile_z = np.tile(m.tiles[0].positions[:, 2], m.layout.count)
+        up = tile_z > 0.9 * tile_z.max()
+        row = (np.arange(m.vertex_count) // m.tiles[0].vertex_count) // 8
+        faces = np.stack([np.asarray(c) for c in m.faces], 1).astype(np.int64)
+        agree = np.einsum("ij,ij->i", _face_normals(P, faces), N[faces].mean(1))
+        for r in range(4):
+            assert np.mean(np.einsum("ij,ij->i", N, radial)[up & (row == r)] > 0) > 0.97, (method, r)
+            assert np.median(agree[row[faces[:, 0]] == r]) > 0.9, (method, r)
+
+
+def test_check_size_counts_the_bytes_of_the_mapped_mesh(variant):
+    """check_size's figure is the size of the buffers map() returns (float32 positions,
+    normals, uvs) plus the uint32 faces, measured on a built model."""
+    m = _model(base="plane", tile="thorn", tiles_u=3, tiles_v=2, mode="exact")
+    p, n, uv = m.map()
+    measured = sum(np.asarray(c).nbytes for x in (p, n, uv, m.faces) for c in x)
+    assert mapping.check_size(m.vertex_count, m.face_count) == measured
+    too_many = tessellate.MAX_VERTICES + 1
+    with pytest.raises(ValueError, match=rf"^ddm: tiles_u x tiles_v gives {too_many:,} vertices "
+                                         r"and 1 triangles \(4\.0 GiB for the mapped mesh"):
+        mapping.check_size(too_many, 1)
