@@ -250,6 +250,9 @@ def test_grid_resolution_keeps_the_aspect_and_the_closed_minimums():
     with pytest.raises(ValueError, match=f"limit of {tessellate.MAX_VERTICES:,} vertices"):
         tessellate.grid_resolution(plane, n + 1)
     assert isinstance(tessellate.MAX_VERTICES, int)  # a count, printed as one
+    # a grid of exactly MAX_VERTICES (2^27 = 2^14 x 2^13 vertices) is allowed
+    cyl = surfaces.Cylinder(1.0, 2 * np.pi * 8190.5 / 16383)
+    assert tessellate.grid_resolution(cyl, 2**14 - 1) == (2**14 - 1, 2**13 - 1)
 
 
 def test_sphere_poles_take_the_ring_mean_height_and_the_base_normal(variant):
