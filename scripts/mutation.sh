@@ -32,7 +32,7 @@ cd "$(dirname "$0")/.."
 declare -A SELECTION=(
   [mi_displace/evaluate/metrics.py]="tests/evaluate/test_metrics.py"
   [mi_displace/core/heightfield.py]="tests/core/test_heightfield.py"
-  [mi_displace/core/surfaces.py]="tests/core/test_surfaces.py tests/core/test_thickness.py"
+  [mi_displace/core/surfaces.py]="tests/core/test_surfaces.py"
   [mi_displace/core/tessellate.py]="tests/core/test_tessellate.py"
   [mi_displace/ddm/mapping.py]="tests/ddm/test_ddm_mapping.py tests/ddm/test_ddm_orientation.py"
 )
