@@ -253,3 +253,18 @@ def test_principal_directions_do_not_depend_on_the_units(variant, scale):
     for d, t in ((d_max, s.dp_dv), (d_min, s.dp_du)):
         t = np.asarray(t) / np.linalg.norm(np.asarray(t), axis=0)
         assert np.allclose(np.abs(np.sum(d * t, 0)), 1, atol=1e-5)
+
+
+@pytest.mark.parametrize("kind, base, props", [
+    ("rectangle", surfaces.Plane(), {}),
+    ("sphere", surfaces.Sphere(1.3), {"radius": 1.3}),
+])
+def test_plane_and_sphere_follow_mitsubas_uv_convention(variant, kind, base, props):
+    """Position and normal at (u, v) equal those of Mitsuba's own shape
+    (Shape.eval_parameterization), so a texture lands where Mitsuba puts it."""
+    u, v = uv_grid(7)
+    si = mi.load_dict({"type": kind, **props}).eval_parameterization(mi.Point2f(u, v))
+    assert np.all(np.asarray(si.is_valid()))
+    s = base.sample(u, v)
+    assert np.allclose(np.asarray(s.p), np.asarray(si.p), atol=1e-5)
+    assert np.allclose(np.asarray(s.n), np.asarray(si.n), atol=1e-5)

@@ -1,4 +1,5 @@
 """The DDM / HDDM mapping (eq. 1-2), the normal methods (§3.2) and the extremes."""
+import os
 import warnings
 
 import numpy as np
@@ -274,3 +275,32 @@ def test_check_size_counts_the_bytes_of_the_mapped_mesh(variant):
     with pytest.raises(ValueError, match=rf"^ddm: tiles_u x tiles_v gives {too_many:,} vertices "
                                          r"and 1 triangles \(4\.0 GiB for the mapped mesh"):
         mapping.check_size(too_many, 1)
+
+
+def test_check_size_limits_at_their_boundaries(monkeypatch):
+    """Three limits, each passed exactly at its bound: the vertex index range, 3 indices per
+    face in 32 bits, and 3x the mapped mesh within half the physical memory (a 72 GiB
+    machine: faces of 12 bytes up to 12 GiB); without sysconf the memory is taken as 16 GiB."""
+    pages = {"SC_PAGE_SIZE": 4096, "SC_PHYS_PAGES": 2**40 // 4096}   # 1 TiB first
+    monkeypatch.setattr(os, "sysconf", lambda name: pages[name])
+    mapping.check_size(tessellate.MAX_VERTICES, 0)
+    with pytest.raises(ValueError, match="more than fits"):
+        mapping.check_size(tessellate.MAX_VERTICES + 1, 0)
+    mapping.check_size(0, (2**32 - 1) // 3)
+    with pytest.raises(ValueError, match="more than fits"):
+        mapping.check_size(0, (2**32 - 1) // 3 + 1)
+    pages["SC_PHYS_PAGES"] = 72 * 2**30 // 4096
+    assert mapping.check_size(0, 2**30) == 12 * 2**30
+    with pytest.raises(ValueError, match=r"^ddm: tiles x gives 0 vertices and 1,073,741,825 "
+                       r"triangles \(12\.0 GiB for the mapped mesh, ~3x that while building\), "
+                       r"more than fits \(limit [0-9,]+ vertices, half of 72 GiB memory\); use "
+                       r"fewer tiles or a smaller tile$"):
+        mapping.check_size(0, 2**30 + 1, "tiles x")
+
+    def no_sysconf(name):
+        raise ValueError(name)
+    monkeypatch.setattr(os, "sysconf", no_sysconf)
+    limit = 8 * 2**30 // 36                    # 3 * 12 bytes per face within 8 GiB
+    mapping.check_size(0, limit)
+    with pytest.raises(ValueError, match="half of 16 GiB memory"):
+        mapping.check_size(0, limit + 1)
