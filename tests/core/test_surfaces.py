@@ -258,6 +258,7 @@ def test_principal_directions_do_not_depend_on_the_units(variant, scale):
 @pytest.mark.parametrize("kind, base, props", [
     ("rectangle", surfaces.Plane(), {}),
     ("sphere", surfaces.Sphere(1.3), {"radius": 1.3}),
+    ("sphere", surfaces.Sphere(), {}),            # both default to the unit sphere
 ])
 def test_plane_and_sphere_follow_mitsubas_uv_convention(variant, kind, base, props):
     """Position and normal at (u, v) equal those of Mitsuba's own shape
