@@ -269,3 +269,25 @@ def test_plane_and_sphere_follow_mitsubas_uv_convention(variant, kind, base, pro
     s = base.sample(u, v)
     assert np.allclose(np.asarray(s.p), np.asarray(si.p), atol=1e-5)
     assert np.allclose(np.asarray(s.n), np.asarray(si.n), atol=1e-5)
+
+
+def test_principal_direction_of_a_sheared_frame_with_a_vanishing_row(variant):
+    """A strongly sheared frame (E = 4, F = 1.5, G = 1) whose shape operator W is lower
+    triangular with w11 = kappa_max: the first row of W - kappa_max I vanishes and only the
+    second gives the eigenvector.  Truth: the Rayleigh quotient II(d) / I(d) along d."""
+    k1, k2 = 2.0, -0.5
+    s_u, s_v = np.array([2.0, 0.0, 0.0]), np.array([0.75, np.sqrt(0.4375), 0.0])
+    I = np.array([[s_u @ s_u, s_u @ s_v], [s_v @ s_u, s_v @ s_v]])
+    W = np.array([[k1, 0.0], [I[0, 1] * (k2 - k1) / I[1, 1], k2]])   # I W symmetric
+    B = I @ W
+    # tangent n_u, n_v with S_u . n_u = B11, S_v . n_u = B21, S_u . n_v = B12, S_v . n_v = B22
+    T = np.stack([s_u[:2], s_v[:2]])
+    n_u, n_v = (np.append(np.linalg.solve(T, B[:, k]), 0.0) for k in range(2))
+    vec = lambda a: mi.Vector3f(*(mi.Float([c]) for c in a))
+    s = surfaces.SurfaceSample(p=mi.Point3f(0, 0, 0), dp_du=vec(s_u), dp_dv=vec(s_v),
+                               n=vec([0.0, 0.0, 1.0]), dn_du=vec(n_u), dn_dv=vec(n_v))
+    k_max, k_min, d_max, d_min = (np.asarray(a).ravel() for a in surfaces.principal_curvatures(s))
+    assert np.allclose([k_max[0], k_min[0]], [k1, k2], atol=1e-5)
+    for d, k in ((d_max, k1), (d_min, k2)):
+        ab = np.linalg.solve(T.T, d[:2])                    # d = a S_u + b S_v
+        assert np.isclose(ab @ B @ ab / (ab @ I @ ab), k, atol=1e-4)
