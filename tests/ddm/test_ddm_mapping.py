@@ -304,3 +304,25 @@ def test_check_size_limits_at_their_boundaries(monkeypatch):
     mapping.check_size(0, limit)
     with pytest.raises(ValueError, match="half of 16 GiB memory"):
         mapping.check_size(0, limit + 1)
+
+
+def test_normal_methods_on_an_affine_map(variant):
+    """On a plane the map T is affine, J = diag(2 su, 2 sv, height): the tangent method is
+    then exact, (J T1) x (J T2) = cof(J) N, like the cofactor (jacobian) method, while the
+    naive one maps the normal as a vector, J N (the error the paper rejects it for)."""
+    m = _model(base="plane", tile="stone:2", tiles_u=4, tiles_v=3, height=0.2, w_offset=0.05,
+               mode="exact")
+    k = np.arange(m.vertex_count) % m.tiles[0].vertex_count
+    J = np.array([2 * m.layout.size[0], 2 * m.layout.size[1], 0.2])
+    unit = lambda a: a / np.linalg.norm(a, axis=1, keepdims=True)
+    # tolerances: float32 rounding, and for the two finite offsets (eps = 1e-3 tile units)
+    # its cancellation, ~ulp(T) / (eps |J|) ~ 5e-4
+    expect = {"jacobian": (unit(m.tiles[0].normals[k] / J), 1e-5),
+              "tangent": (unit(m.tiles[0].normals[k] / J), 2e-3),
+              "naive": (unit(m.tiles[0].normals[k] * J), 2e-3)}
+    for method, (e, tol) in expect.items():
+        _, n, _ = m.map(method=method)
+        assert np.abs(_np(n) - e).max() < tol, method
+    with pytest.raises(ValueError, match=r"^ddm: unknown 'normals' 'bent'; expected one of "
+                                         r"tangent, jacobian, naive$"):
+        m.map(method="bent")
