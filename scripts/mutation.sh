@@ -14,9 +14,12 @@
 # row in SELECTION below) with `pytest -x`, on llvm_ad_rgb, under `nice -n 15`, without
 # bytecode caching (a stale .pyc of the previous mutant would otherwise be tested instead)
 # and without the suite's full garbage collection between tests (scripts/mutation_nogc.py).
+# Any failing exit status kills the mutant: mutmut 2 counts only status 1 as a failure, so
+# a mutant that crashes the test process (a segfault in Dr.Jit from an index out of range)
+# or breaks collection (status 2) was reported as a survivor.
 # --resume keeps the module's mutmut cache and refreshes the tree from HEAD (also undoing
-# the mutant of a run that was stopped): mutmut keeps the killed mutants and, the tests
-# having changed, retests the survivors, then goes on with the untested (commit first).
+# the mutant of a run that was stopped): mutmut keeps the killed mutants, retests the
+# survivors, then goes on with the untested (commit new tests first).
 # The run stops after --minutes (default 60, shared by all modules of one call) and
 # prints per module: mutants, killed, survived, timed out, untested, score, run time.
 # --show prints each mutant's changed line (scripts/mutation_cache.py).  Never run
@@ -67,7 +70,7 @@ done
 if [ $report = 1 ] && [ ${#modules[@]} = 0 ]; then
   for d in out/mutation/*/MODULE; do [ -e "$d" ] && modules+=("$(cat "$d")"); done
 fi
-[ ${#modules[@]} -gt 0 ] || { sed -n 2,24p "$0"; exit 2; }
+[ ${#modules[@]} -gt 0 ] || { sed -n 2,27p "$0"; exit 2; }
 
 if [ $report = 0 ]; then
   deadline=$(( $(date +%s) + 60 * minutes ))
@@ -75,6 +78,9 @@ if [ $report = 0 ]; then
     work=$(dir_of "$module")
     if [ $resume = 1 ] && [ -e "$work/.mutmut-cache" ]; then
       rm -rf "$work/tests" && git archive HEAD | tar -x -C "$work"
+      # retest the survivors even where the tests did not change (e.g. a new runner)
+      python -c "import sqlite3; db = sqlite3.connect('$work/.mutmut-cache'); db.execute(
+          \"update Mutant set status = 'untested' where status = 'bad_survived'\"); db.commit()"
     else
       rm -rf "$work" && mkdir -p "$work"
       git archive HEAD | tar -x -C "$work"
@@ -88,7 +94,8 @@ if [ $report = 0 ]; then
     start=$(date +%s)
     (cd "$work" && timeout "$left" nice -n 15 mutmut run --paths-to-mutate "$module" \
         --tests-dir tests --simple-output --no-progress \
-        --runner "python -m pytest -x -q -p no:cacheprovider -p mutation_nogc ${TESTS[$module]}" > mutmut.log 2>&1) || true
+        --runner "bash -c 'python -m pytest -x -q -p no:cacheprovider -p mutation_nogc ${TESTS[$module]} || exit 1'" \
+        > mutmut.log 2>&1) || true
     echo $(( $(cat "$work/SECONDS") + $(date +%s) - start )) > "$work/SECONDS"
     grep -q "^Traceback" "$work/mutmut.log" && echo "mutmut failed: see $work/mutmut.log" >&2
   done

@@ -92,9 +92,10 @@ def test_closed_bases_stay_watertight(variant, name, euler):
     assert m.volume > 0  # faces wound outwards
 
 
-def test_faces_point_along_shading_normals(variant):
-    base = surfaces.Torus(1.0, 0.3)
-    t = tessellate.displace_parametric(base, ripple, 0.02, 0.0, 64, 32)
+@pytest.mark.parametrize("size", [1.0, 0.1])     # (S_u x S_v) . n above and below 1
+def test_faces_point_along_shading_normals(variant, size):
+    base = surfaces.Torus(1.0 * size, 0.3 * size)
+    t = tessellate.displace_parametric(base, ripple, 0.02 * size, 0.0, 64, 32)
     m = trimesh.Trimesh(np.asarray(t.positions).T, np.asarray(t.faces).T, process=False)
     vn = np.asarray(t.normals).T[m.faces].mean(1)
     assert np.mean(np.sum(vn * m.face_normals, 1) > 0) > 0.999

@@ -177,10 +177,11 @@ def test_texture_space_animation_translates_tiles(variant):
     assert np.allclose(_np(p1)[:, 2], 0.1 * 1.5 * z, atol=1e-5)   # sin(2 pi 0.25) = 1
 
 
-def test_multi_tile_layouts_map_each_instance_with_its_own_tile(variant):
-    m = _model(base="plane", tile="thorn,hexagon,stone:4", layout="random", seed=3, tiles_u=5,
+@pytest.mark.parametrize("tiles", ["thorn,hexagon,stone:4", "thorn,hexagon"])
+def test_multi_tile_layouts_map_each_instance_with_its_own_tile(variant, tiles):
+    m = _model(base="plane", tile=tiles, layout="random", seed=3, tiles_u=5,
                tiles_v=4, height=0.3, mode="maps", map_resolution=4)
-    assert len(m.placement.groups) == 3
+    assert len(m.placement.groups) == len(tiles.split(","))
     p, _, _ = m.map()
     P = _np(p)
     su, sv = m.layout.size
