@@ -175,6 +175,11 @@ def test_texture_space_animation_translates_tiles(variant):
     assert np.allclose(du[:, 0], 0.5 * m.layout.size[0], atol=1e-6) and np.allclose(du[:, 1], 0)
     z = np.tile(m.tiles[0].positions[:, 2], m.layout.count)
     assert np.allclose(_np(p1)[:, 2], 0.1 * 1.5 * z, atol=1e-5)   # sin(2 pi 0.25) = 1
+    # and along v (the translation's second component)
+    m = _model(base="plane", tile="hexagon", tiles_u=4, tiles_v=4, height=0.1, mode="exact",
+               animation=Animation(velocity_v=-0.25, rotation_rate=0.0))
+    dv = _np(m.map(t=2.0)[2]) - _np(m.map(t=0.0)[2])
+    assert np.allclose(dv[:, 1], -0.5 * m.layout.size[1], atol=1e-6) and np.allclose(dv[:, 0], 0)
 
 
 @pytest.mark.parametrize("tiles", ["thorn,hexagon,stone:4", "thorn,hexagon"])
