@@ -329,6 +329,17 @@ def test_normal_methods_on_an_affine_map(variant):
     for method, (e, tol) in expect.items():
         _, n, _ = m.map(method=method)
         assert np.abs(_np(n) - e).max() < tol, method
+    # tiles turned by 30 degrees: J = diag(2 su, 2 sv, h) [R 0; 0 1]
+    m = _model(base="plane", tile="stone:2", tiles_u=4, tiles_v=3, height=0.2, mode="exact",
+               animation=Animation(rotation_rate=np.radians(30.0)))
+    c, s_ = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
+    J = np.diag([2 * m.layout.size[0], 2 * m.layout.size[1], 0.2]) @ np.array(
+        [[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
+    N = m.tiles[0].normals[k]
+    for method, e, tol in (("jacobian", unit(N @ np.linalg.inv(J)), 1e-5),
+                           ("naive", unit(N @ J.T), 2e-3)):
+        _, n, _ = m.map(t=1.0, method=method)
+        assert np.abs(_np(n) - e).max() < tol, method
     with pytest.raises(ValueError, match=r"^ddm: unknown 'normals' 'bent'; expected one of "
                                          r"tangent, jacobian, naive$"):
         m.map(method="bent")
