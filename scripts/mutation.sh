@@ -103,7 +103,7 @@ if [ $report = 0 ]; then
         '$work/.mutmut-cache').execute(\"select id from Mutant where status = 'untested'\")))"); do
       [ $(( deadline - $(date +%s) )) -gt 60 ] || break
       (cd "$work" && timeout $(( deadline - $(date +%s) )) nice -n 15 mutmut run "$pk" \
-          --tests-dir tests --simple-output --no-progress \
+          --paths-to-mutate "$module" --tests-dir tests --simple-output --no-progress \
           --runner "bash -c 'python -m pytest -x -q -p no:cacheprovider -p mutation_nogc ${TESTS[$module]} || exit 1'" \
           >> mutmut.log 2>&1) || true
     done
