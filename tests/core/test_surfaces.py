@@ -196,7 +196,7 @@ def test_thickness_is_the_distance_through_the_solid():
 def test_each_invalid_parameter_is_named():
     cases = [
         (lambda: surfaces.Sphere(radius=0), r"^sphere: 'radius' must be > 0, got 0$"),
-        (lambda: surfaces.Cylinder(radius=-1), r"^cylinder: 'radius' must be > 0, got -1$"),
+        (lambda: surfaces.Cylinder(radius=0), r"^cylinder: 'radius' must be > 0, got 0$"),
         (lambda: surfaces.Cylinder(length=0), r"^cylinder: 'length' must be > 0, got 0$"),
         (lambda: surfaces.Torus(minor_radius=0), r"^torus: 'minor_radius' must be > 0, got 0$"),
         (lambda: surfaces.Torus(1.0, 1.0), r"^torus: 'major_radius' \(1.0\) must exceed "
