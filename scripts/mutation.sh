@@ -1,51 +1,120 @@
 #!/usr/bin/env bash
 # Mutation testing of numeric modules with mutmut 2 (not part of CI: it is long).
 #
-#   scripts/mutation.sh [--minutes N] MODULE TESTS [MODULE TESTS ...]
-#   scripts/mutation.sh --minutes 60 mi_displace/evaluate/metrics.py tests/evaluate/test_metrics.py
+#   scripts/mutation.sh [--minutes N] [--resume] MODULE [MODULE ...]
+#   scripts/mutation.sh [--minutes N] [--resume] MODULE "TESTS" [MODULE "TESTS" ...]
+#   scripts/mutation.sh --report [MODULE ...]          (default: every module run so far)
+#   scripts/mutation.sh --show MODULE [STATUS]         (default STATUS: bad_survived)
+#   scripts/mutation.sh --list                         (the test selection of each module)
 #
-# Each MODULE is mutated by mutmut in a scratch copy of the committed tree (out/mutation/,
-# so the working tree is never touched), and each mutant runs only its TESTS (a quoted,
-# space-separated list) with `pytest -x`, on llvm_ad_rgb, without bytecode caching (a stale
-# .pyc of the previous mutant would otherwise be tested instead).  The run stops after
-# --minutes (default 60) and reports per module: killed, survived, timed out, untested.
-# Survivors: `cd out/mutation && mutmut show ID`.  Results are in docs/testing.md.
+# Each MODULE (e.g. mi_displace/core/surfaces.py) is mutated by mutmut in its own scratch
+# copy of the committed tree (out/mutation/<module>/, so the working tree is never touched
+# and several modules can run side by side from separate shells).  Each mutant runs only
+# the module's TESTS (a quoted, space-separated pytest selection; default: the module's
+# row in SELECTION below) with `pytest -x`, on llvm_ad_rgb, under `nice -n 15`, without
+# bytecode caching (a stale .pyc of the previous mutant would otherwise be tested instead)
+# and without the suite's full garbage collection between tests (scripts/mutation_nogc.py).
+# Any failing exit status kills the mutant: mutmut 2 counts only status 1 as a failure, so
+# a mutant that crashes the test process (a segfault in Dr.Jit from an index out of range)
+# or breaks collection (status 2) was reported as a survivor.
+# --resume keeps the module's mutmut cache and refreshes the tree from HEAD (also undoing
+# the mutant of a run that was stopped): mutmut keeps the killed mutants, retests the
+# survivors, then goes on with the untested (commit new tests first).
+# The run stops after --minutes (default 60, shared by all modules of one call) and
+# prints per module: mutants, killed, survived, timed out, untested, score, run time.
+# --show prints each mutant's changed line (scripts/mutation_cache.py).  Never run
+# `mutmut show`/`apply` in a scratch copy while its run is going: they re-map mutmut's
+# line records against the (then mutated) file, and the run dies ("Attribute Mutant.line
+# is required") and hangs.  Results are in docs/testing.md.
 # Needs `pip install "mutmut<3"` (mutmut 3 forks after Dr.Jit started its thread pool).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-minutes=60
-if [ "${1:-}" = "--minutes" ]; then minutes=$2; shift 2; fi
-[ $# -ge 2 ] || { sed -n 2,14p "$0"; exit 2; }
+
+# The test selection of each measured module: the tests that exercise it, kept small so
+# that one mutant runs in seconds.
+declare -A SELECTION=(
+  [mi_displace/evaluate/metrics.py]="tests/evaluate/test_metrics.py"
+  [mi_displace/core/heightfield.py]="tests/core/test_heightfield.py"
+  [mi_displace/core/surfaces.py]="tests/core/test_surfaces.py"
+  [mi_displace/core/tessellate.py]="tests/core/test_tessellate.py"
+  [mi_displace/ddm/mapping.py]="tests/ddm/test_ddm_mapping.py tests/ddm/test_ddm_orientation.py"
+)
+
 root=$PWD
-work=out/mutation
-rm -rf "$work" && mkdir -p "$work"
-git archive HEAD | tar -x -C "$work"
-cd "$work"
-export PYTHONDONTWRITEBYTECODE=1 MI_DISPLACE_TEST_VARIANTS=llvm_ad_rgb PATH="$root/.venv/bin:$PATH"
-deadline=$(( $(date +%s) + 60 * minutes ))
-while [ $# -ge 2 ]; do
-  module=$1 tests=$2; shift 2
-  left=$(( deadline - $(date +%s) ))
-  [ "$left" -gt 60 ] || { echo "time is up before $module"; break; }
-  echo "== $module ($tests), $left s left"
-  timeout "$left" mutmut run --paths-to-mutate "$module" --tests-dir tests --simple-output \
-      --no-progress --runner "python -m pytest -x -q -p no:cacheprovider $tests" > /dev/null || true
+export PYTHONDONTWRITEBYTECODE=1 MI_DISPLACE_TEST_VARIANTS=llvm_ad_rgb PATH="$root/.venv/bin:$PATH" \
+    PYTHONPATH="$root/scripts"
+dir_of() { echo "out/mutation/$(echo "${1#mi_displace/}" | tr / _ | sed 's/\.py$//')"; }
+
+minutes=60 resume=0 report=0
+while [ $# -gt 0 ]; do
+  case $1 in
+    --minutes) minutes=$2; shift 2 ;;
+    --resume) resume=1; shift ;;
+    --report) report=1; shift ;;
+    --show) exec python scripts/mutation_cache.py show "$(dir_of "$2")" "${3:-bad_survived}" ;;
+    --list) for m in "${!SELECTION[@]}"; do echo "$m: ${SELECTION[$m]}"; done | sort; exit 0 ;;
+    *) break ;;
+  esac
 done
-python - <<'EOF'
-import sqlite3
-db = sqlite3.connect(".mutmut-cache")
-rows = db.execute("select SourceFile.filename, Mutant.status, count(*) from Mutant "
-                  "join Line on Mutant.line = Line.id join SourceFile on Line.sourcefile = "
-                  "SourceFile.id group by 1, 2").fetchall()
-files = sorted({r[0] for r in rows})
-print("| module | killed | survived | timeout | untested | score ((killed + timeout) / tested) |")
-print("|---|---|---|---|---|---|")
-for f in files:
-    n = {s: c for name, s, c in rows if name == f}
-    # "suspicious" = killed, but slowly; a timeout (e.g. an endless loop) counts as detected
-    killed = n.get("ok_killed", 0) + n.get("ok_suspicious", 0)
-    survived, timeout, untested = n.get("bad_survived", 0), n.get("bad_timeout", 0), n.get("untested", 0)
-    tested = killed + survived + timeout
-    score = f"{100 * (killed + timeout) / tested:.0f} %" if tested else "-"
-    print(f"| {f} | {killed} | {survived} | {timeout} | {untested} | {score} |")
-EOF
+
+modules=()
+declare -A TESTS
+while [ $# -gt 0 ]; do
+  module=$1; shift
+  if [ $# -gt 0 ] && [[ $1 == tests/* ]]; then TESTS[$module]=$1; shift
+  elif [ -n "${SELECTION[$module]:-}" ]; then TESTS[$module]=${SELECTION[$module]}
+  elif [ $report = 0 ]; then echo "no test selection for $module: add it to SELECTION" >&2; exit 2
+  fi
+  modules+=("$module")
+done
+if [ $report = 1 ] && [ ${#modules[@]} = 0 ]; then
+  for d in out/mutation/*/MODULE; do [ -e "$d" ] && modules+=("$(cat "$d")"); done
+fi
+[ ${#modules[@]} -gt 0 ] || { sed -n 2,27p "$0"; exit 2; }
+
+if [ $report = 0 ]; then
+  deadline=$(( $(date +%s) + 60 * minutes ))
+  for module in "${modules[@]}"; do
+    work=$(dir_of "$module")
+    if [ $resume = 1 ] && [ -e "$work/.mutmut-cache" ]; then
+      rm -rf "$work/tests" && git archive HEAD | tar -x -C "$work"
+      # retest the survivors even where the tests did not change (e.g. a new runner)
+      python -c "import sqlite3; db = sqlite3.connect('$work/.mutmut-cache'); db.execute(
+          \"update Mutant set status = 'untested' where status = 'bad_survived'\"); db.commit()"
+    else
+      rm -rf "$work" && mkdir -p "$work"
+      git archive HEAD | tar -x -C "$work"
+      echo 0 > "$work/SECONDS"
+    fi
+    echo "$module" > "$work/MODULE"
+    echo "${TESTS[$module]}" > "$work/TESTS"
+    left=$(( deadline - $(date +%s) ))
+    [ "$left" -gt 60 ] || { echo "time is up before $module"; break; }
+    echo "== $module (${TESTS[$module]}), $left s left"
+    start=$(date +%s)
+    (cd "$work" && timeout "$left" nice -n 15 mutmut run --paths-to-mutate "$module" \
+        --tests-dir tests --simple-output --no-progress \
+        --runner "bash -c 'python -m pytest -x -q -p no:cacheprovider -p mutation_nogc ${TESTS[$module]} || exit 1'" \
+        > mutmut.log 2>&1) || true
+    # mutmut 2 looks up the cached status of a mutant by its line's text, so the mutants of
+    # a line that also occurs earlier in the file (`periodic_u = True` in three classes)
+    # are never run: run each of them by id
+    for pk in $(python -c "import sqlite3; print(*(r[0] for r in sqlite3.connect(
+        '$work/.mutmut-cache').execute(\"select id from Mutant where status = 'untested'\")))"); do
+      [ $(( deadline - $(date +%s) )) -gt 60 ] || break
+      (cd "$work" && timeout $(( deadline - $(date +%s) )) nice -n 15 mutmut run "$pk" \
+          --paths-to-mutate "$module" --tests-dir tests --simple-output --no-progress \
+          --runner "bash -c 'python -m pytest -x -q -p no:cacheprovider -p mutation_nogc ${TESTS[$module]} || exit 1'" \
+          >> mutmut.log 2>&1) || true
+    done
+    echo $(( $(cat "$work/SECONDS") + $(date +%s) - start )) > "$work/SECONDS"
+    grep -q "^Traceback" "$work/mutmut.log" && echo "mutmut failed: see $work/mutmut.log" >&2
+  done
+fi
+
+dirs=()
+for module in "${modules[@]}"; do
+  work=$(dir_of "$module")
+  [ -e "$work/.mutmut-cache" ] && dirs+=("$work") || echo "$module: not run" >&2
+done
+[ ${#dirs[@]} = 0 ] || python scripts/mutation_cache.py report "${dirs[@]}"

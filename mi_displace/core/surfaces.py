@@ -73,7 +73,9 @@ def principal_curvatures(s: SurfaceSample):
     du = dr.select(use_first, a1, a2)
     dv = dr.select(use_first, b1, b2)
     d_max = s.dp_du * du + s.dp_dv * dv
-    umbilic = dr.squared_norm(d_max) <= 1e-12 * (E + G) * (E + G) + 1e-30
+    # |d_max| ~ |S_u| |W|: the umbilic test is relative to both (scale-free, unitless)
+    w_sq = w11 * w11 + w12 * w12 + w21 * w21 + w22 * w22
+    umbilic = dr.squared_norm(d_max) <= 1e-12 * (E + G) * w_sq + 1e-30
     d_max = dr.normalize(dr.select(umbilic, s.dp_du, d_max))
     d_min = dr.normalize(dr.cross(s.n, d_max))
     return k_max, k_min, d_max, d_min

@@ -5,6 +5,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial import Delaunay
 
 from mi_displace.core import surfaces, tessellate
 
@@ -91,9 +92,10 @@ def test_closed_bases_stay_watertight(variant, name, euler):
     assert m.volume > 0  # faces wound outwards
 
 
-def test_faces_point_along_shading_normals(variant):
-    base = surfaces.Torus(1.0, 0.3)
-    t = tessellate.displace_parametric(base, ripple, 0.02, 0.0, 64, 32)
+@pytest.mark.parametrize("size", [1.0, 0.1])     # (S_u x S_v) . n above and below 1
+def test_faces_point_along_shading_normals(variant, size):
+    base = surfaces.Torus(1.0 * size, 0.3 * size)
+    t = tessellate.displace_parametric(base, ripple, 0.02 * size, 0.0, 64, 32)
     m = trimesh.Trimesh(np.asarray(t.positions).T, np.asarray(t.faces).T, process=False)
     vn = np.asarray(t.normals).T[m.faces].mean(1)
     assert np.mean(np.sum(vn * m.face_normals, 1) > 0) > 0.999
@@ -134,11 +136,16 @@ def test_mesh_displacement_welds_uv_seams(variant):
 def test_grid_resolution_validation():
     s = surfaces.Sphere(1.0)
     for bad in (0, -3, 2.5):
-        with pytest.raises(ValueError, match="resolution"):
+        with pytest.raises(ValueError, match=rf"^displaced: 'resolution' must be a positive "
+                                             rf"integer, got {bad}$"):
             tessellate.grid_resolution(s, bad)
-    with pytest.raises(ValueError, match="edge_length"):
-        tessellate.grid_resolution(s, edge_length=0.0)
-    with pytest.raises(ValueError, match="exceeds"):
+    for bad in (0.0, -1.0, float("inf")):
+        with pytest.raises(ValueError, match=rf"^displaced: 'edge_length' must be a positive "
+                                             rf"number, got {bad}$"):
+            tessellate.grid_resolution(s, edge_length=bad)
+    with pytest.raises(ValueError, match=r"^displaced: a 200000 x 100000 grid \(20,000,300,001 "
+                                         r"vertices\) exceeds the limit of [0-9,]+ vertices; "
+                                         r"lower 'resolution' or raise 'edge_length'$"):
         tessellate.grid_resolution(s, 200_000)
     nu, nv = tessellate.grid_resolution(s, edge_length=0.1)
     assert nu == int(np.ceil(2 * np.pi / 0.1)) and nv == int(np.ceil(np.pi / 0.1))
@@ -218,3 +225,123 @@ def test_mesh_crease_with_cancelling_vertex_normals_stays_finite(variant):
     faces = np.array([[0, 1, 2], [1, 3, 2]])
     t = tessellate.displace_mesh(pos, nrm, uvs, faces, ripple, 0.05, 0.5, 4)
     assert np.all(np.isfinite(np.asarray(t.positions))) and np.all(np.isfinite(np.asarray(t.normals)))
+
+
+# ---------------------------------------------------------------------------------------
+# Mutants that survived the tests above (scripts/mutation.sh, docs/testing.md).
+
+
+def test_grid_resolution_keeps_the_aspect_and_the_closed_minimums():
+    """nv = ceil(nu extent_v / extent_u); at least 3 cells around a periodic direction and
+    2 between poles (fewer cannot close the surface); the default is 64 cells along u."""
+    sphere, torus, plane = surfaces.Sphere(1.0), surfaces.Torus(1.0, 0.3), surfaces.Plane()
+    assert tessellate.grid_resolution(sphere, 24) == (24, 12)         # extents 2 pi : pi
+    assert tessellate.grid_resolution(sphere) == (64, 32)
+    assert tessellate.grid_resolution(torus, 26) == (26, 6)           # ceil(26 * 0.6 / 2.6)
+    assert tessellate.grid_resolution(plane, 1) == (1, 1)
+    assert tessellate.grid_resolution(sphere, 1) == (3, 2)
+    assert tessellate.grid_resolution(torus, 1) == (3, 3)
+    assert tessellate.grid_resolution(surfaces.Cylinder(1.0, 0.1), 1) == (3, 1)
+    assert tessellate.grid_resolution(plane, edge_length=0.5) == (4, 4)
+    assert tessellate.grid_resolution(plane, edge_length=0.3) == (7, 7)  # ceil(2 / 0.3)
+    assert tessellate.grid_resolution(sphere, edge_length=100.0) == (3, 2)
+    # the vertex limit bounds (nu + 1)(nv + 1): the largest square grid under it passes
+    n = int(np.floor(np.sqrt(tessellate.MAX_VERTICES))) - 1
+    assert tessellate.grid_resolution(plane, n) == (n, n)
+    with pytest.raises(ValueError, match=f"limit of {tessellate.MAX_VERTICES:,} vertices"):
+        tessellate.grid_resolution(plane, n + 1)
+    assert isinstance(tessellate.MAX_VERTICES, int)  # a count, printed as one
+    # a grid of exactly MAX_VERTICES (2^27 = 2^14 x 2^13 vertices) is allowed
+    cyl = surfaces.Cylinder(1.0, 2 * np.pi * 8190.5 / 16383)
+    assert tessellate.grid_resolution(cyl, 2**14 - 1) == (2**14 - 1, 2**13 - 1)
+
+
+def test_sphere_poles_take_the_ring_mean_height_and_the_base_normal(variant):
+    """h = 0.2 + 0.5 v + 0.3 cos(2 pi u): the ring mean is 0.2 at the north pole (v = 0,
+    +z) and 0.7 at the south pole; each pole row collapses onto one displaced point."""
+    def h(uv):
+        c, s = dr.cos(dr.two_pi * uv.x), dr.sin(dr.two_pi * uv.x)
+        return 0.2 + 0.5 * uv.y + 0.3 * c, mi.Vector2f(-0.3 * dr.two_pi * s, 0.5)
+    r, scale, mid, nu, nv = 1.5, 0.4, 0.1, 12, 6
+    t = tessellate.displace_parametric(surfaces.Sphere(r), h, scale, mid, nu, nv)
+    assert t.vertex_count == (nu + 1) * (nv + 1) == dr.width(t.normals)
+    assert t.face_count == 2 * nu * nv - 2 * nu == dr.width(t.faces)
+    p, n = np.asarray(t.positions).T, np.asarray(t.normals).T
+    north, south = slice(0, nu + 1), slice(nv * (nu + 1), None)
+    assert np.allclose(p[north], [0, 0, r + scale * (0.2 - mid)], atol=1e-6)
+    assert np.allclose(p[south], [0, 0, -(r + scale * (0.7 - mid))], atol=1e-6)
+    assert np.allclose(n[north], [0, 0, 1], atol=1e-6)
+    assert np.allclose(n[south], [0, 0, -1], atol=1e-6)
+    disp = np.asarray(t.displacement)
+    assert np.allclose(disp[north], scale * (0.2 - mid), atol=1e-6)
+    assert np.allclose(disp[south], scale * (0.7 - mid), atol=1e-6)
+    assert np.allclose(np.asarray(t.base_positions).T[north], [0, 0, r], atol=1e-6)
+
+
+def test_face_weighted_normals_against_numpy():
+    """Area-weighted vertex normals (sum of the faces' edge cross products over each
+    position class), against a NumPy loop over faces; a vertex whose faces have no area
+    keeps its fallback."""
+    mi.set_variant("llvm_ad_rgb")
+    rng = np.random.default_rng(3)
+    box = trimesh.creation.box()
+    pos = box.vertices[box.faces].reshape(-1, 3) + 0.05 * rng.normal(size=(36, 3))
+    faces = np.arange(36).reshape(-1, 3)
+    groups = trimesh.grouping.group_rows(np.round(box.vertices[box.faces].reshape(-1, 3), 6),
+                                         require_count=None)
+    cls = np.zeros(36, np.int64)
+    for k, g in enumerate(groups):
+        cls[g] = k
+    # one extra degenerate triangle on its own class
+    pos = np.vstack([pos, [[2, 2, 2]] * 3])
+    faces = np.vstack([faces, [[36, 37, 38]]])
+    cls = np.concatenate([cls, [len(groups)] * 3])
+    expected = np.zeros((len(groups) + 1, 3))
+    for f in faces:
+        fn = np.cross(pos[f[1]] - pos[f[0]], pos[f[2]] - pos[f[0]])
+        for v in f:
+            expected[cls[v]] += fn
+    expected = expected[cls]
+    norm = np.linalg.norm(expected, axis=1, keepdims=True)
+    fallback = np.tile([0.0, 0.6, 0.8], (len(pos), 1))
+    expected = np.where(norm > 0, expected / np.where(norm > 0, norm, 1), fallback)
+    vec = lambda a, t: t(*(mi.Float(c) for c in a.T.astype(np.float32)))
+    got = tessellate.face_weighted_normals(
+        vec(pos, mi.Point3f), mi.Vector3u(*(mi.UInt32(c.astype(np.uint32)) for c in faces.T)),
+        mi.UInt32(cls.astype(np.uint32)), len(groups) + 1, vec(fallback, mi.Vector3f))
+    assert np.allclose(np.asarray(got).T, expected, atol=1e-5)
+
+
+def test_vertex_frames_are_exact_for_linear_fields():
+    """Positions, normals and UVs all affine on a jittered planar triangulation: every
+    triangle has the same Jacobians, so each vertex gets them exactly, S_u = first column of
+    (d uv / d xy)^-1 and n_u its image under the normal field's matrix, projected onto the
+    tangent plane of the unit normal.  A triangle with a degenerate UV map adds nothing."""
+    rng = np.random.default_rng(1)
+    g = np.linspace(0, 1, 6)
+    x, y = (a.ravel() for a in np.meshgrid(g, g))
+    x, y = x + 0.03 * rng.normal(size=x.size), y + 0.03 * rng.normal(size=y.size)
+    faces = Delaunay(np.stack([x, y], 1)).simplices
+    pos = np.stack([x, 0.5 * x + y, 0.2 * x - 0.3 * y], 1)            # an affine sheet
+    A = np.array([[0.8, 0.3], [-0.2, 1.1]])                           # uv = A (x, y) + b
+    uvs = np.stack([x, y], 1) @ A.T + [0.1, -0.2]
+    M = np.array([[0.4, -0.1], [0.2, 0.3], [0.05, -0.15]])            # m = M (x, y) + c
+    nrm = np.stack([x, y], 1) @ M.T + [0.1, 0.2, 1.0]
+    # a triangle of real area whose UVs are collinear (vertex 36 off the sheet, its uv
+    # midway between those of vertices 0 and 1): it must not dilute their average
+    pos = np.vstack([pos, [[0.3, 0.2, 1.0]]])
+    nrm = np.vstack([nrm, [[0, 0, 1]]])
+    uvs = np.vstack([uvs, [0.5 * (uvs[0] + uvs[1])]])
+    faces = np.vstack([faces, [[0, 1, 36]]])
+    s_u, s_v, n_u, n_v = tessellate.vertex_frames(pos, nrm, uvs, faces)
+    Ainv = np.linalg.inv(A)                                           # d xy / d uv
+    dP = np.array([[1, 0], [0.5, 1], [0.2, -0.3]]) @ Ainv             # columns: S_u, S_v
+    dm = M @ Ainv
+    unit = nrm[:36] / np.linalg.norm(nrm[:36], axis=1, keepdims=True)
+    for got, col in ((s_u, dP[:, 0]), (s_v, dP[:, 1])):
+        assert np.allclose(got[:36], col, atol=1e-5)
+    for got, col in ((n_u, dm[:, 0]), (n_v, dm[:, 1])):
+        expect = col - np.sum(col * unit, 1, keepdims=True) * unit
+        assert np.allclose(got[:36], expect, atol=1e-5)
+    for a in (s_u, s_v, n_u, n_v):                # vertex 36 has no valid triangle
+        assert np.all(a[36] == 0)

@@ -1,9 +1,12 @@
 """The DDM / HDDM mapping (eq. 1-2), the normal methods (§3.2) and the extremes."""
+import os
 import warnings
 
 import numpy as np
 import pytest
 
+from mi_displace.core import tessellate
+from mi_displace.ddm import mapping
 from mi_displace.ddm import normals as nrm
 from mi_displace.ddm.animation import Animation
 from mi_displace.ddm.model import DDMConfig, DDMModel, FoldingWarning
@@ -172,12 +175,18 @@ def test_texture_space_animation_translates_tiles(variant):
     assert np.allclose(du[:, 0], 0.5 * m.layout.size[0], atol=1e-6) and np.allclose(du[:, 1], 0)
     z = np.tile(m.tiles[0].positions[:, 2], m.layout.count)
     assert np.allclose(_np(p1)[:, 2], 0.1 * 1.5 * z, atol=1e-5)   # sin(2 pi 0.25) = 1
+    # and along v (the translation's second component)
+    m = _model(base="plane", tile="hexagon", tiles_u=4, tiles_v=4, height=0.1, mode="exact",
+               animation=Animation(velocity_v=-0.25, rotation_rate=0.0))
+    dv = _np(m.map(t=2.0)[2]) - _np(m.map(t=0.0)[2])
+    assert np.allclose(dv[:, 1], -0.5 * m.layout.size[1], atol=1e-6) and np.allclose(dv[:, 0], 0)
 
 
-def test_multi_tile_layouts_map_each_instance_with_its_own_tile(variant):
-    m = _model(base="plane", tile="thorn,hexagon,stone:4", layout="random", seed=3, tiles_u=5,
+@pytest.mark.parametrize("tiles", ["thorn,hexagon,stone:4", "thorn,hexagon"])
+def test_multi_tile_layouts_map_each_instance_with_its_own_tile(variant, tiles):
+    m = _model(base="plane", tile=tiles, layout="random", seed=3, tiles_u=5,
                tiles_v=4, height=0.3, mode="maps", map_resolution=4)
-    assert len(m.placement.groups) == 3
+    assert len(m.placement.groups) == len(tiles.split(","))
     p, _, _ = m.map()
     P = _np(p)
     su, sv = m.layout.size
@@ -215,3 +224,122 @@ def test_extreme_scales_stay_finite_and_relative(variant, radius):
     z = np.tile(m.tiles[0].positions[:, 2], m.layout.count)
     rel = np.linalg.norm(P, axis=1) / radius - (1 + 0.05 * z)
     assert np.abs(rel).max() < 2e-3          # same relative accuracy at every scale
+
+
+# ---------------------------------------------------------------------------------------
+# Mutants that survived the tests above (scripts/mutation.sh, docs/testing.md).
+
+
+def test_mode_aliases_follow_the_comparison_convention():
+    """$mode reference/approximation (README scene convention) is exact/maps."""
+    assert DDMConfig(mode="reference").check().mode == "exact"
+    assert DDMConfig(mode="approximation").check().mode == "maps"
+    assert DDMConfig(mode="exact").check().mode == "exact"
+    with pytest.raises(ValueError, match="unknown 'mode' 'approx'"):
+        DDMConfig(mode="approx").check()
+
+
+def _face_normals(P, faces):
+    fn = np.cross(P[faces[:, 1]] - P[faces[:, 0]], P[faces[:, 2]] - P[faces[:, 0]])
+    return fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-30)
+
+
+@pytest.mark.parametrize("base, params", [
+    ("sphere", {"radius": 0.1}),                 # (S_u x S_v) . n < 0, tiles at both poles
+    ("cylinder", {"radius": 0.1, "length": 0.5}),  # (S_u x S_v) . n = 2 pi r L > 0, below 1
+])
+def test_tiles_face_outwards_on_small_bases_up_to_the_poles(variant, base, params):
+    """The orientation sign is that of (S_u x S_v) . n whatever its size, taken inside each
+    tile (a sphere's first and last tile rows touch the poles, beyond which the
+    parametrisation mirrors): the tops of the stones face away from the axis, and every
+    row's faces are wound like its normals."""
+    m = _model(base=base, base_params=params, tile="stone:1", tiles_u=8, tiles_v=3,
+               height=0.02, mode="exact")
+    for method in ("tangent", "jacobian"):
+        p, n, _ = m.map(method=method)
+        P, N = _np(p), _np(n)
+        radial = P if base == "sphere" else P * [1, 1, 0]
+        radial = radial / np.linalg.norm(radial, axis=1, keepdims=True)
+        tile_z = np.tile(m.tiles[0].positions[:, 2], m.layout.count)
+        up = tile_z > 0.9 * tile_z.max()
+        row = (np.arange(m.vertex_count) // m.tiles[0].vertex_count) // 8
+        faces = np.stack([np.asarray(c) for c in m.faces], 1).astype(np.int64)
+        agree = np.einsum("ij,ij->i", _face_normals(P, faces), N[faces].mean(1))
+        for r in range(3):
+            assert np.mean(np.einsum("ij,ij->i", N, radial)[up & (row == r)] > 0) > 0.97, (method, r)
+            assert np.median(agree[row[faces[:, 0]] == r]) > 0.9, (method, r)
+
+
+def test_check_size_counts_the_bytes_of_the_mapped_mesh(variant):
+    """check_size's figure is the size of the buffers map() returns (float32 positions,
+    normals, uvs) plus the uint32 faces, measured on a built model."""
+    m = _model(base="plane", tile="thorn", tiles_u=3, tiles_v=2, mode="exact")
+    p, n, uv = m.map()
+    measured = sum(np.asarray(c).nbytes for x in (p, n, uv, m.faces) for c in x)
+    assert mapping.check_size(m.vertex_count, m.face_count) == measured
+    too_many = tessellate.MAX_VERTICES + 1
+    with pytest.raises(ValueError, match=rf"^ddm: tiles_u x tiles_v gives {too_many:,} vertices "
+                                         r"and 1 triangles \(4\.0 GiB for the mapped mesh"):
+        mapping.check_size(too_many, 1)
+
+
+def test_check_size_limits_at_their_boundaries(monkeypatch):
+    """Three limits, each passed exactly at its bound: the vertex index range, 3 indices per
+    face in 32 bits, and 3x the mapped mesh within half the physical memory (a 72 GiB
+    machine: faces of 12 bytes up to 12 GiB); without sysconf the memory is taken as 16 GiB."""
+    pages = {"SC_PAGE_SIZE": 4096, "SC_PHYS_PAGES": 2**40 // 4096}   # 1 TiB first
+    monkeypatch.setattr(os, "sysconf", lambda name: pages[name])
+    mapping.check_size(tessellate.MAX_VERTICES, 0)
+    with pytest.raises(ValueError, match="more than fits"):
+        mapping.check_size(tessellate.MAX_VERTICES + 1, 0)
+    mapping.check_size(0, (2**32 - 1) // 3)
+    with pytest.raises(ValueError, match="more than fits"):
+        mapping.check_size(0, (2**32 - 1) // 3 + 1)
+    pages["SC_PHYS_PAGES"] = 72 * 2**30 // 4096
+    assert mapping.check_size(0, 2**30) == 12 * 2**30
+    with pytest.raises(ValueError, match=r"^ddm: tiles x gives 0 vertices and 1,073,741,825 "
+                       r"triangles \(12\.0 GiB for the mapped mesh, ~3x that while building\), "
+                       r"more than fits \(limit [0-9,]+ vertices, half of 72 GiB memory\); use "
+                       r"fewer tiles or a smaller tile$"):
+        mapping.check_size(0, 2**30 + 1, "tiles x")
+
+    def no_sysconf(name):
+        raise ValueError(name)
+    monkeypatch.setattr(os, "sysconf", no_sysconf)
+    limit = 8 * 2**30 // 36                    # 3 * 12 bytes per face within 8 GiB
+    mapping.check_size(0, limit)
+    with pytest.raises(ValueError, match="half of 16 GiB memory"):
+        mapping.check_size(0, limit + 1)
+
+
+def test_normal_methods_on_an_affine_map(variant):
+    """On a plane the map T is affine, J = diag(2 su, 2 sv, height): the tangent method is
+    then exact, (J T1) x (J T2) = cof(J) N, like the cofactor (jacobian) method, while the
+    naive one maps the normal as a vector, J N (the error the paper rejects it for)."""
+    m = _model(base="plane", tile="stone:2", tiles_u=4, tiles_v=3, height=0.2, w_offset=0.05,
+               mode="exact")
+    k = np.arange(m.vertex_count) % m.tiles[0].vertex_count
+    J = np.array([2 * m.layout.size[0], 2 * m.layout.size[1], 0.2])
+    unit = lambda a: a / np.linalg.norm(a, axis=1, keepdims=True)
+    # tolerances: float32 rounding, and for the two finite offsets (eps = 1e-3 tile units)
+    # its cancellation, ~ulp(T) / (eps |J|) ~ 5e-4
+    expect = {"jacobian": (unit(m.tiles[0].normals[k] / J), 1e-5),
+              "tangent": (unit(m.tiles[0].normals[k] / J), 2e-3),
+              "naive": (unit(m.tiles[0].normals[k] * J), 2e-3)}
+    for method, (e, tol) in expect.items():
+        _, n, _ = m.map(method=method)
+        assert np.abs(_np(n) - e).max() < tol, method
+    # tiles turned by 30 degrees: J = diag(2 su, 2 sv, h) [R 0; 0 1]
+    m = _model(base="plane", tile="stone:2", tiles_u=4, tiles_v=3, height=0.2, mode="exact",
+               animation=Animation(rotation_rate=np.radians(30.0)))
+    c, s_ = np.cos(np.radians(30.0)), np.sin(np.radians(30.0))
+    J = np.diag([2 * m.layout.size[0], 2 * m.layout.size[1], 0.2]) @ np.array(
+        [[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
+    N = m.tiles[0].normals[k]
+    for method, e, tol in (("jacobian", unit(N @ np.linalg.inv(J)), 1e-5),
+                           ("naive", unit(N @ J.T), 2e-3)):
+        _, n, _ = m.map(t=1.0, method=method)
+        assert np.abs(_np(n) - e).max() < tol, method
+    with pytest.raises(ValueError, match=r"^ddm: unknown 'normals' 'bent'; expected one of "
+                                         r"tangent, jacobian, naive$"):
+        m.map(method="bent")
