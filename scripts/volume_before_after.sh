@@ -28,15 +28,12 @@ import before_displacement as bd, before_field as bf, before_slicing as bs
 from mi_displace.bench import volume as B
 from mi_displace.volume import displacement as ad, field as af, slicing as as_
 
-obj, sensor = B.walnut_256(), B._sensor()
-scene = mi.load_dict({"type": "scene", "sun": {"type": "directional", "direction": [-0.5, 0.6, -1],
-                                               "irradiance": {"type": "rgb", "value": 2.5}}})
-M = np.array([[1.0, 0, 0, -0.5], [0, 1, 0, -0.5], [0, 0, 0.5, 0], [0, 0, 0, 1]])
-kw = dict(mode="approximation", tf_low=0.0, tf_high=1.0)
+obj, sensor, scene = B.walnut_256(), B._sensor(), B.sun_scene()
+kw = B.VOLUME_KW
 cases = {}
 for side, (d, f, s) in {"before": (bd, bf, bs), "after": (ad, af, as_)}.items():
     st = s.SliceSettings(model="surface", normals="jacobian", spacing=1.0, shadows=False, iso=B.ISO)
-    pull = d.PlacedMap("gaussian", {"amount": 0.5, "sigma": 0.15}, resolution=(32, 32, 32), to_world=M)
+    pull = d.PlacedMap(*B.PULL, resolution=B.PULL_RESOLUTION, to_world=B.PULL_TO_WORLD)
     cases[side + "/undisplaced"] = (s, f.DisplacedVolume(obj, d.DisplacementChain([]), **kw), st)
     cases[side + "/displaced"] = (s, f.DisplacedVolume(obj, d.DisplacementChain([pull], bits=16), **kw), st)
 times = {k: [] for k in cases}

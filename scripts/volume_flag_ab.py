@@ -13,16 +13,13 @@ backend.init()
 import drjit as dr, mitsuba as mi
 from mi_displace.bench import volume as B
 from mi_displace.volume import displacement as ad, field as af, slicing as s
-obj, sensor = B.walnut_256(), B._sensor()
-scene = mi.load_dict({"type": "scene", "sun": {"type": "directional", "direction": [-0.5, 0.6, -1],
-                                               "irradiance": {"type": "rgb", "value": 2.5}}})
-M = np.array([[1.0, 0, 0, -0.5], [0, 1, 0, -0.5], [0, 0, 0.5, 0], [0, 0, 0, 1]])
-kw = dict(mode="approximation", tf_low=0.0, tf_high=1.0)
+obj, sensor, scene = B.walnut_256(), B._sensor(), B.sun_scene()
+M, kw = B.PULL_TO_WORLD, B.VOLUME_KW
 st = s.SliceSettings(model="surface", normals="jacobian", spacing=1.0, shadows=False, iso=B.ISO)
 if os.environ.get("MAP") == "peel":
     pull = ad.PlacedMap("peel", {"angle": 40.0, "hinge": 0.8, "height": 0.6, "radius": 0.5}, to_world=M)
 else:
-    pull = ad.PlacedMap("gaussian", {"amount": 0.5, "sigma": 0.15}, resolution=(32, 32, 32), to_world=M)
+    pull = ad.PlacedMap(*B.PULL, resolution=B.PULL_RESOLUTION, to_world=M)
 und = af.DisplacedVolume(obj, ad.DisplacementChain([]), **kw)
 dis = af.DisplacedVolume(obj, ad.DisplacementChain([pull], bits=16), **kw)
 dis.prepare()

@@ -62,6 +62,20 @@ def walnut_256():
     return ObjectVolume(data, [-0.5] * 3, [0.5] * 3, value_range=(0.0, 1.0), name="walnut 256^3")
 
 
+# The bench frame's light, the Gaussian pull's placement M (§6) and the volumes' transfer
+# settings, shared with scripts/volume_before_after.sh and scripts/volume_flag_ab.py.
+PULL = ("gaussian", {"amount": 0.5, "sigma": 0.15})
+PULL_RESOLUTION = (32, 32, 32)
+PULL_TO_WORLD = np.array([[1.0, 0, 0, -0.5], [0, 1, 0, -0.5], [0, 0, 0.5, 0], [0, 0, 0, 1]])
+VOLUME_KW = dict(mode="approximation", tf_low=0.0, tf_high=1.0)
+
+
+def sun_scene():
+    """The bench frame's scene: one directional light (irradiance 2.5), nothing else."""
+    return mi.load_dict({"type": "scene", "sun": {"type": "directional", "direction": [-0.5, 0.6, -1],
+                                                  "irradiance": {"type": "rgb", "value": 2.5}}})
+
+
 def _sensor():
     return mi.load_dict({"type": "perspective", "fov": FOV,
                          "to_world": mi.ScalarTransform4f().look_at(origin=list(EYE), target=list(TARGET), up=[0, 0, 1]),
@@ -190,14 +204,11 @@ def run(with_flip: bool = True) -> dict:
 
     obj = walnut_256()
     sensor = _sensor()
-    scene = mi.load_dict({"type": "scene", "sun": {"type": "directional", "direction": [-0.5, 0.6, -1],
-                                                   "irradiance": {"type": "rgb", "value": 2.5}}})
+    scene = sun_scene()
     settings = slicing.SliceSettings(model="surface", normals="jacobian", spacing=1.0, shadows=False, iso=ISO)
-    pull = PlacedMap("gaussian", {"amount": 0.5, "sigma": 0.15}, resolution=(32, 32, 32),
-                     to_world=np.array([[1.0, 0, 0, -0.5], [0, 1, 0, -0.5], [0, 0, 0.5, 0], [0, 0, 0, 1]]))
-    plain = DisplacedVolume(obj, DisplacementChain([]), mode="approximation", tf_low=0.0, tf_high=1.0)
-    displaced = DisplacedVolume(obj, DisplacementChain([pull], bits=16), mode="approximation",
-                                tf_low=0.0, tf_high=1.0)
+    pull = PlacedMap(*PULL, resolution=PULL_RESOLUTION, to_world=PULL_TO_WORLD)
+    plain = DisplacedVolume(obj, DisplacementChain([]), **VOLUME_KW)
+    displaced = DisplacedVolume(obj, DisplacementChain([pull], bits=16), **VOLUME_KW)
     (cold_u, warm_u, img_u), (cold_d, warm_d, img_d) = _interleaved_renders(
         scene, sensor, [plain, displaced], settings)
     vtk_s, vtk_reason = vtk_time(obj)
