@@ -330,14 +330,15 @@ def smooth_displaced_normals(n, s_u, s_v, n_u, n_v, disp, grad, scale: float):
     """
     t_u = s_u - dr.dot(s_u, n) * n
     t_v = s_v - dr.dot(s_v, n) * n
-    orientation = dr.sign(dr.dot(dr.cross(t_u, t_v), n))
+    frame = dr.dot(dr.cross(t_u, t_v), n)  # 0 where the frame is degenerate (dr.sign(0) is 1)
+    orientation = dr.select(frame < 0, -1.0, 1.0)
     p_u, p_v = t_u, t_v
     if disp is not None:
         p_u = p_u + disp * (n_u - dr.dot(n_u, n) * n) + scale * grad.x * n
         p_v = p_v + disp * (n_v - dr.dot(n_v, n) * n) + scale * grad.y * n
     normal = dr.cross(p_u, p_v) * orientation
     degenerate = (dr.squared_norm(normal) <= 1e-12 * dr.squared_norm(p_u) * dr.squared_norm(p_v)) | (
-        orientation == 0)
+        frame == 0)
     return dr.normalize(dr.select(degenerate, n, normal))
 
 

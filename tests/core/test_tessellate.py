@@ -345,3 +345,18 @@ def test_vertex_frames_are_exact_for_linear_fields():
         assert np.allclose(got[:36], expect, atol=1e-5)
     for a in (s_u, s_v, n_u, n_v):                # vertex 36 has no valid triangle
         assert np.all(a[36] == 0)
+
+
+def test_smooth_displaced_normals_fall_back_to_n_on_a_degenerate_frame(variant):
+    # s_u parallel to s_v (a collapsed UV chart): the frame has no orientation, so the normal
+    # must be n, not the cross product of the height terms (dr.sign(0) is 1, which hid this).
+    n = mi.Vector3f(0, 0, 1)
+    s = mi.Vector3f(1, 0, 0)
+    zero = mi.Vector3f(0, 0, 0)
+    normal = tessellate.smooth_displaced_normals(n, s, 2 * s, zero, zero, mi.Float(0.1),
+                                                 mi.Vector2f(0.0, 0.7), 1.0)
+    assert np.allclose(np.array(normal).ravel(), [0, 0, 1])
+    # A proper frame still tilts the normal against the slope (the check above can fail).
+    tilted = tessellate.smooth_displaced_normals(n, s, mi.Vector3f(0, 1, 0), zero, zero, mi.Float(0.1),
+                                                 mi.Vector2f(0.0, 0.7), 1.0)
+    assert np.allclose(np.array(tilted).ravel(), np.array([0, -0.7, 1]) / np.hypot(0.7, 1), atol=1e-6)
