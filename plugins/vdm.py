@@ -52,7 +52,8 @@ def _number(plugin, props, name, default, low=None, high=None, integer=False):
     except (TypeError, ValueError):
         raise ValueError(f"{plugin}: '{name}' must be a number, got {value!r}") from None
     if not math.isfinite(x) or (low is not None and x < low) or (high is not None and x > high):
-        raise ValueError(f"{plugin}: '{name}' must be finite and in [{low}, {high}], got {value!r}")
+        bounds = f"{'(-inf' if low is None else f'[{low}'}, {'inf)' if high is None else f'{high}]'}"
+        raise ValueError(f"{plugin}: '{name}' must be finite and in {bounds}, got {value!r}")
     if integer:
         if x != int(x):
             raise ValueError(f"{plugin}: '{name}' must be an integer, got {value!r}")

@@ -103,7 +103,7 @@ def chart_accuracy(out_dir, resolutions=(32, 64, 128, 256, 512, 1024)) -> dict:
         st = model.stats()
         md += (f"## {name}: {st['charts']} charts, {st['tiles_placed']} tiles "
                f"({st['tiles_pruned']} pruned, {st['tiles_straddling']} straddling)\n\n")
-        md += _markdown(rows, [
+        md += tradeoff.markdown(rows, [
             ("map_resolution", "resolution", "d"), ("RMS / diag", "rms_error_rel", ".2e"),
             ("max / diag", "max_error_rel", ".2e"), ("unclamped max", "unclamped_max_rel", ".2e"),
             ("clamped p99", "clamped_p99_rel", ".2e"),
@@ -205,12 +205,6 @@ def plot_geometry_images(path: Path, resolution: int = 256) -> dict:
     return info
 
 
-def _markdown(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
-    head = "| " + " | ".join(c[0] for c in columns) + " |\n|" + "---|" * len(columns) + "\n"
-    return head + "".join("| " + " | ".join("–" if r[c[1]] is None else format(r[c[1]], c[2])
-                                            for c in columns) + " |\n" for r in rows)
-
-
 def write_figures(out_dir, scene_path, quick: bool = False) -> dict:
     """Accuracy table + plot, normal-method table and the map_resolution sweep."""
     out = Path(out_dir)
@@ -227,24 +221,24 @@ def write_figures(out_dir, scene_path, quick: bool = False) -> dict:
     record = {"accuracy": acc, "normal_methods": methods, "epsilon": eps, "sweep": sweep,
               "variant": mi.variant()}
     (out / "ddm_figures.json").write_text(json.dumps(record, indent=2))
-    md = ("## maps vs exact\n\n" + _markdown(acc, [
+    md = ("## maps vs exact\n\n" + tradeoff.markdown(acc, [
         ("map_resolution", "resolution", "d"), ("RMS / diag", "rms_error_rel", ".3g"),
         ("max / diag", "max_error_rel", ".3g"), ("normal mean (deg)", "normal_mean_deg", ".3g"),
         ("normal max (deg)", "normal_max_deg", ".3g"), ("maps bytes", "maps_bytes", ",")])
-        + "\n## normal methods vs jacobian (exact)\n\n" + _markdown(methods, [
+        + "\n## normal methods vs jacobian (exact)\n\n" + tradeoff.markdown(methods, [
             ("method", "method", "s"), ("mean (deg)", "mean_deg", ".3g"),
             ("p99 (deg)", "p99_deg", ".3g"), ("max (deg)", "max_deg", ".3g")])
         + "\n## tangent normals against jacobian per epsilon (tile units; maps at 256)\n\n"
-        + _markdown(eps, [("epsilon", "epsilon", "g"), ("exact mean (deg)", "exact_mean_deg", ".3g"),
+        + tradeoff.markdown(eps, [("epsilon", "epsilon", "g"), ("exact mean (deg)", "exact_mean_deg", ".3g"),
                           ("exact max (deg)", "exact_max_deg", ".3g"),
                           ("maps mean (deg)", "maps_mean_deg", ".3g"),
                           ("maps max (deg)", "maps_max_deg", ".3g")])
-        + "\n## image sweep (mi-displace tradeoff)\n\n" + _markdown(
+        + "\n## image sweep (mi-displace tradeoff)\n\n" + tradeoff.markdown(
             [{**r["point"], **r} for r in sweep["points"] if r["ok"]], [
                 ("map_resolution", "map_resolution", "s"), ("FLIP", "flip", ".4f"),
                 ("warm time (s)", "time_warm_s", ".3f"),
                 ("path needs (s)", "path_crossover_s", ".3g")])
-        + "\npath reference by spp:\n\n" + _markdown(sweep["path_curve"], [
+        + "\npath reference by spp:\n\n" + tradeoff.markdown(sweep["path_curve"], [
             ("spp", "spp", "d"), ("FLIP", "flip", ".4f"), ("time (s)", "time_s", ".3f")]))
     (out / "ddm_figures.md").write_text(md)
     dr.sync_thread()

@@ -91,3 +91,14 @@ def test_baseline_errors_name_their_own_plugin(variant, plugin):
             mi.load_dict(props)
         assert f"{plugin}: '{name}'" in str(caught.value), str(caught.value)
         assert "vdm:" not in str(caught.value)
+
+
+@pytest.mark.parametrize("bad, bounds", [({"tiling_u": 0}, "[1e-06, inf)"),
+                                         ({"steps": 5000}, "[1, 4096]")])
+def test_range_errors_print_both_bounds(variant, bad, bounds):
+    """An open bound reads as infinity, never as 'None'."""
+    props = dict({"type": "relief", "height": _constant_texture(0.5), "depth": 0.1}, **bad)
+    name, value = next(iter(bad.items()))
+    with pytest.raises(Exception) as caught:
+        mi.load_dict(props)
+    assert f"relief: '{name}' must be finite and in {bounds}, got {value}" in str(caught.value)
