@@ -509,6 +509,12 @@ def write_outputs(out_dir, result: dict, reference: np.ndarray, images: dict) ->
     plot(result, out_dir / "tradeoff.png")
 
 
+#: Points of a trade-off plot beyond which only the Pareto front is labelled.
+MAX_PLOT_LABELS = 40
+#: Colours of the groups of points (Matplotlib's cycle without C7, the grey of path's curve).
+PLOT_COLOURS = [f"C{i}" for i in range(10) if i != 7]
+
+
 def plot(result: dict, path=None, ax=None, title: str | None = None) -> Path | None:
     """Error against warm time, log-log: every point labelled, the Pareto front joined, the
     reference's noise floor as a dashed line and the path tracer's own curve.
@@ -535,14 +541,22 @@ def plot(result: dict, path=None, ax=None, title: str | None = None) -> Path | N
         ax.annotate(f"{p['spp']}", (p["time_s"], p["flip"]), fontsize=6, color="0.4",
                     xytext=(3, 3), textcoords="offset points")
     ok = [r for r in result["points"] if r["ok"]]
-    ax.scatter([r["time_warm_s"] for r in ok], [r["flip"] for r in ok], color="C0", zorder=3,
-               label="approximation settings")
+    groups = _plot_groups(ok)
+    for i, (name, members) in enumerate(groups.items()):
+        ax.scatter([r["time_warm_s"] for r, _ in members], [r["flip"] for r, _ in members],
+                   color=PLOT_COLOURS[i % len(PLOT_COLOURS)],
+                   marker="osD^v<>"[i // len(PLOT_COLOURS) % 7], zorder=3,
+                   label=name or "approximation settings")
     front = sorted((r for r in ok if r["pareto"]), key=lambda r: r["time_warm_s"])
-    ax.plot([r["time_warm_s"] for r in front], [r["flip"] for r in front], "-", color="C3",
-            zorder=2, label="Pareto front")
-    for r in ok:
-        ax.annotate(r["label"], (r["time_warm_s"], r["flip"]), fontsize=7, xytext=(4, -9),
-                    textcoords="offset points")
+    ax.plot([r["time_warm_s"] for r in front], [r["flip"] for r in front], "-", color="0.2",
+            lw=0.8, zorder=2, label="Pareto front")
+    # every point is labelled while that stays legible, else only the Pareto front
+    legible = len(ok) <= MAX_PLOT_LABELS
+    for members in groups.values():
+        for r, text in members:
+            if text and (legible or r["pareto"]):
+                ax.annotate(text, (r["time_warm_s"], r["flip"]), fontsize=6, xytext=(3, 3),
+                            textcoords="offset points")
     if result["noise_floor_flip"] > 0:  # a deterministic reference (raster) has none
         ax.axhline(result["noise_floor_flip"], ls="--", color="C2",
                    label=f"reference noise floor ({result['reference_spp']} spp)")
@@ -558,6 +572,24 @@ def plot(result: dict, path=None, ax=None, title: str | None = None) -> Path | N
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     return Path(path)
+
+
+def _plot_groups(points: list[dict]) -> dict[str, list[tuple[dict, str]]]:
+    """Points grouped for a legend by their first knob's setting, each with the values of
+    the rest as its label: ``{"direction=b: slices": [(point, "12"), ...]}``; one unnamed
+    group, labelled in full, when they all share the first setting."""
+    def split(r):
+        items = list(r["point"].items())
+        first = f"{items[0][0]}={items[0][1]}" if items else ""
+        return first, [k for k, _ in items[1:]], ",".join(str(v) for _, v in items[1:])
+
+    if len({split(r)[0] for r in points}) < 2:
+        return {"": [(r, r["label"]) for r in points]}
+    groups: dict[str, list[tuple[dict, str]]] = {}
+    for r in points:
+        first, keys, values = split(r)
+        groups.setdefault(first + (": " + ",".join(keys) if keys else ""), []).append((r, values))
+    return groups
 
 
 def table_rows(result: dict) -> list[dict]:

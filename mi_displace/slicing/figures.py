@@ -163,6 +163,12 @@ def geometric_error(scene_name: str, cam: str, res: int, slices: int) -> dict:
             "wrong_surface_fraction": float(wrong.sum() / max(covered.sum(), 1))}
 
 
+def _line(ax, pts: list[tuple[float, float]], fmt: str, label: str) -> None:
+    """``pts`` joined on ``ax``; nothing (not a stray format string) when it is empty."""
+    if pts:
+        ax.plot(*zip(*pts), fmt, label=label)
+
+
 def plot(out: Path, results: dict) -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -175,7 +181,7 @@ def plot(out: Path, results: dict) -> None:
             ax = fig.add_subplot(1, 3, i + 1)
             for direction in ("a", "b", "c", "best", "screen"):
                 pts = [(r["slices"], r["flip"]) for r in rows if r["theta_deg"] == theta and r["direction"] == direction]
-                ax.plot(*zip(*pts), "o-", label=direction)
+                _line(ax, pts, "o-", direction)
             floor = next(r["noise_floor"] for r in rows if r["theta_deg"] == theta)
             ax.axhline(floor, color="gray", ls=":", label="ref. noise")
             ax.set_xscale("log", base=2)
@@ -195,7 +201,7 @@ def plot(out: Path, results: dict) -> None:
         for obj in ("depth", "hull"):
             for az in sorted({r["azimuth_deg"] for r in rows}):
                 pts = [(r["slices"], r["flip"]) for r in rows if r["object"] == obj and r["azimuth_deg"] == az]
-                ax.plot(*zip(*pts), "o-" if obj == "depth" else "s--", label=f"{obj} az {az}°")
+                _line(ax, pts, "o-" if obj == "depth" else "s--", f"{obj} az {az}°")
         ax.set_xlabel("slices N")
         ax.set_ylabel("FLIP")
         ax.legend(fontsize=7)
@@ -203,7 +209,7 @@ def plot(out: Path, results: dict) -> None:
         n = max(r["slices"] for r in rows)
         for obj in ("depth", "hull"):
             pts = [(r["azimuth_deg"], r["flip"]) for r in rows if r["object"] == obj and r["slices"] == n]
-            ax.plot(*zip(*pts), "o-", label=f"{obj}, N={n}")
+            _line(ax, pts, "o-", f"{obj}, N={n}")
         ax.set_xlabel("view azimuth from a cube face (°)")
         ax.legend(fontsize=8)
         fig.tight_layout()

@@ -209,3 +209,19 @@ def test_cluster_matches_local(sweep, tmp_path):
         assert (tmp_path / "out" / f"point_{i}.png").read_bytes() == local_png
     assert [p["flip"] for p in remote["points"]] == pytest.approx(
         [p["flip"] for p in result["points"]], abs=0.0)
+
+
+def test_plot_groups_by_first_knob():
+    """Mixed explicit points get one legend entry per first setting, the rest as labels;
+    a one-knob sweep stays one group labelled in full."""
+    def pt(**kv):
+        return {"point": kv, "label": ",".join(f"{k}={v}" for k, v in kv.items())}
+
+    mixed = [pt(direction="a", slices="4"), pt(direction="a", slices="12"),
+             pt(mode="relief", relief_steps="8"), pt(mode="vdm")]
+    groups = tr._plot_groups(mixed)
+    assert list(groups) == ["direction=a: slices", "mode=relief: relief_steps", "mode=vdm"]
+    assert [text for _, text in groups["direction=a: slices"]] == ["4", "12"]
+    assert groups["mode=vdm"] == [(mixed[3], "")]
+    single = [pt(resolution="6"), pt(resolution="24")]
+    assert tr._plot_groups(single) == {"": [(single[0], "resolution=6"), (single[1], "resolution=24")]}
