@@ -577,13 +577,13 @@ def plot(result: dict, path=None, ax=None, title: str | None = None) -> Path | N
 def _plot_groups(points: list[dict]) -> dict[str, list[tuple[dict, str]]]:
     """Points grouped for a legend by their first knob's setting, each with the values of
     the rest as its label: ``{"direction=b: slices": [(point, "12"), ...]}``; one unnamed
-    group, labelled in full, when they all share the first setting."""
+    group, labelled in full, when they all share the first setting or none does."""
     def split(r):
         items = list(r["point"].items())
         first = f"{items[0][0]}={items[0][1]}" if items else ""
         return first, [k for k, _ in items[1:]], ",".join(str(v) for _, v in items[1:])
 
-    if len({split(r)[0] for r in points}) < 2:
+    if not 1 < len({split(r)[0] for r in points}) < len(points):  # nothing to group
         return {"": [(r, r["label"]) for r in points]}
     groups: dict[str, list[tuple[dict, str]]] = {}
     for r in points:
