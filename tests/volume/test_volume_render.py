@@ -172,3 +172,38 @@ def test_fast_paths_agree_with_the_slow_ones(variant, monkeypatch, tilt):
     monkeypatch.setattr(slicing, "REUSE_LOOKUP", False)                # shading reads the D_k again
     for kw, img in zip(props, images):
         assert img.max() > 0 and np.array_equal(img, _render(_scene("volume_slicer", vol, **kw))), kw
+
+def test_volume_methods_in_a_trace_run_with_the_collector_paused(variant, monkeypatch):
+    """volpath's medium calls are vectorised: Dr.Jit traces every live medium, holding plain
+    pointers, and the heterogeneous medium calls the Python volume (sigma_t and albedo) inside
+    that trace.  Python's collector, started by an allocation there, could free a dropped
+    scene's medium before its turn (plugins/_guard.py); the volume's methods see it off, and
+    it is on again after the render."""
+    import gc
+
+    vol = _volume(maps=[("gaussian", {"amount": 0.3})])
+    colour = mi.load_dict({"type": "displaced_volume", "output": "albedo", "source": vol,
+                           "albedo_low": [0.9, 0.2, 0.1], "albedo_high": [0.1, 0.3, 0.9]})
+    seen = {"sigma_t": [], "albedo": []}
+
+    def probe(name, method):
+        def noted(*args, **kwargs):
+            seen[name].append(gc.isenabled())
+            return method(*args, **kwargs)
+        return noted
+
+    monkeypatch.setattr(vol.volume, "sigma_t", probe("sigma_t", vol.volume.sigma_t))
+    monkeypatch.setattr(colour.albedo, "albedo", probe("albedo", colour.albedo.albedo))
+    scene = mi.load_dict({
+        "type": "scene", "integrator": {"type": "volpath", "max_depth": 2},
+        "sun": {"type": "directional", "direction": [-0.5, 0.6, -1], "irradiance": {"type": "rgb", "value": 6.0}},
+        "sensor": {"type": "perspective", "fov": 30.0, "film": {"type": "hdrfilm", "width": 8, "height": 8},
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[0.9, -2.3, 1.3], target=[0, 0, 0], up=[0, 0, 1])},
+        "proxy": {"type": "volume_proxy", "volume": vol, "bsdf": {"type": "null"},
+                  "interior": {"type": "heterogeneous", "sigma_t": vol, "albedo": colour}}})
+    assert gc.isenabled()
+    img = _render(scene, spp=4)
+    assert img.max() > 0
+    for name, calls in seen.items():
+        assert calls and not any(calls), (name, calls)
+    assert gc.isenabled()
