@@ -54,7 +54,7 @@ from mi_displace.volume import maps as primitives
 from mi_displace.volume.displacement import DisplacementChain, PlacedMap
 from mi_displace.volume.field import AlbedoField, DisplacedVolume
 from mi_displace.volume.objects import load_raw, load_vol, piggy_bank
-from mi_displace.plugins._guard import constructor
+from mi_displace.plugins._guard import collector_paused, constructor
 
 MAX_MAPS = 32
 OUTPUTS = ("sigma_t", "albedo")
@@ -195,11 +195,15 @@ class DisplacedVolumePlugin(mi.Volume):
         self.in_medium = True
         return self._box
 
+    # eval / eval_1 run inside the trace of volpath's vectorised medium calls, which holds
+    # every live medium through plain pointers: the collector stays off (plugins/_guard.py)
+    @collector_paused
     def eval(self, it, active=True):
         if self.albedo is not None:
             return self.albedo.albedo(it.p)
         return mi.Color3f(self.volume.sigma_t(it.p))
 
+    @collector_paused
     def eval_1(self, it, active=True):
         """sigma_t, or the mean of the albedo's channels."""
         if self.albedo is not None:

@@ -4,10 +4,11 @@ texture memory, accuracy, and VTK's CPU volume renderer on the same volume.
 * ``voxels``: the walnut CT resampled to 256^3 (trilinear), box [-0.5, 0.5]^3;
 * ``render_time_warm_s``: ``volume_slicer`` at 512 x 512, one voxel between slices, one map
   (a Gaussian pull, eq. 8, over the upper half, D_k 32^3 at 16 bit), Jacobian normals
-  (eq. 6), surface model without shadows (as VTK), warm median of 5 renders that alternate
-  with the undisplaced ones (a shared machine's load falls on both alike);
+  (eq. 6), surface model without shadows (as VTK), warm median of REPEATS (15) renders that
+  alternate with the undisplaced ones (a shared machine's load falls on both alike);
   ``undisplaced_time_warm_s``: the same volume and view without the map, same process;
-  ``displacement_overhead`` = their ratio (Table 1 analogue: ``fps`` = 1 / render time);
+  ``displacement_overhead`` = their ratio (Table 1 analogue: ``fps`` = 1 / render time),
+  ``displacement_overhead_cpu`` the same ratio of CPU (process) times;
 * ``coverage`` / ``undisplaced_coverage``: the fraction of pixels with radiance > 0 in the
   displaced / undisplaced frame (the pull raises the walnut: it covers more of the screen);
   ``overhead_per_covered_pixel``: the overhead in time per covered pixel, the part of
@@ -46,6 +47,9 @@ SCENE = ROOT / "scenes" / "volume_walnut_peel.xml"
 RES, SIZE, ISO = 256, 512, 0.3
 EYE, TARGET, FOV = (0.9, -2.3, 1.3), (0.0, 0.0, 0.0), 34.0
 TARGETS = {"undisplaced_vs_vtk": 2.0, "displacement_overhead": 1.6}
+#: Warm renders of each frame (after a cold one); at 0.05-0.1 s a frame, 5 left the ratio
+#: drifting by +-0.3 between runs on a loaded machine
+REPEATS = 15
 #: Paper's Table 2 maps: (primitive, resolution); our D_k needs >= 2 nodes per axis.
 TABLE2 = [("peel", (128, 128, 2), 320), ("slabs", (128, 128, 2), 320),
           ("gaussian", (32, 32, 32), 640), ("seam", (64, 64, 64), 5120)]
@@ -82,23 +86,26 @@ def _sensor():
                          "film": {"type": "hdrfilm", "width": SIZE, "height": SIZE}})
 
 
-def _interleaved_renders(scene, sensor, volumes, settings, repeats=5) -> list[tuple[float, float, np.ndarray]]:
-    """(cold, warm median, image) per volume; the warm renders alternate between the volumes so
-    that a shared machine's load falls on all of them alike."""
+def _interleaved_renders(scene, sensor, volumes, settings, repeats=REPEATS) -> list[tuple[float, float, float, np.ndarray]]:
+    """(cold, warm median, warm median CPU time, image) per volume; the warm renders alternate
+    between the volumes so that a shared machine's load falls on all of them alike (CPU time,
+    i.e. process time of all threads, is the less load-sensitive of the two)."""
     from mi_displace.volume import slicing
 
     times = [[] for _ in volumes]
+    cpu = [[] for _ in volumes]
     images = [None] * len(volumes)
     for _ in range(repeats + 1):
         for i, vol in enumerate(volumes):
             dr.sync_thread()
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.process_time()
             images[i] = np.array(slicing.render(scene, sensor, vol, settings))
             times[i].append(time.perf_counter() - start)
+            cpu[i].append(time.process_time() - start_cpu)
     for img in images:
         if not np.isfinite(img).all():
             raise ValueError("bench volume: non-finite pixels in the slicer's image")
-    return [(t[0], statistics.median(t[1:]), img) for t, img in zip(times, images)]
+    return [(t[0], statistics.median(t[1:]), statistics.median(c[1:]), img) for t, c, img in zip(times, cpu, images)]
 
 
 def setup_vtk() -> str | None:
@@ -209,7 +216,7 @@ def run(with_flip: bool = True) -> dict:
     pull = PlacedMap(*PULL, resolution=PULL_RESOLUTION, to_world=PULL_TO_WORLD)
     plain = DisplacedVolume(obj, DisplacementChain([]), **VOLUME_KW)
     displaced = DisplacedVolume(obj, DisplacementChain([pull], bits=16), **VOLUME_KW)
-    (cold_u, warm_u, img_u), (cold_d, warm_d, img_d) = _interleaved_renders(
+    (cold_u, warm_u, cpu_u, img_u), (cold_d, warm_d, cpu_d, img_d) = _interleaved_renders(
         scene, sensor, [plain, displaced], settings)
     vtk_s, vtk_reason = vtk_time(obj)
     coverage_u, coverage_d = (float((img.max(-1) > 0).mean()) for img in (img_u, img_d))
@@ -221,6 +228,7 @@ def run(with_flip: bool = True) -> dict:
         "undisplaced_time_warm_s": warm_u,
         "undisplaced_time_cold_s": cold_u,
         "displacement_overhead": warm_d / warm_u,
+        "displacement_overhead_cpu": cpu_d / cpu_u,
         "fps": 1.0 / warm_d,
         "texture_bytes": displaced.chain.nbytes(),
         "object_texture_bytes": obj.nbytes(),

@@ -92,6 +92,27 @@ def nonzero_cells(nonzero: np.ndarray) -> np.ndarray:
     return flags
 
 
+def read_box(nonzero: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Texture-coordinate box (lo (3,), hi (3,), x y z) outside which every trilinear read of a
+    D_k touches only zero nodes (so reads exactly D = 0, α = 1, J = 0, ∇α = 0), or None where
+    it would cover every coordinate.  ``nonzero``: (z, y, x) node mask.  With the non-zero
+    nodes in [k0, k1] along an axis of n nodes, a read at texel position t = u n - 1/2 uses
+    nodes floor(t) and floor(t) + 1 (clamped), all zero for t < k0 - 1 or t >= k1 + 1; one
+    node more each side covers the rounding of t: u in [(k0 - 3/2) / n, (k1 + 5/2) / n)
+    (unbounded where k0 = 0 or k1 = n - 1: clamp-to-edge reads those nodes beyond the face)."""
+    if not nonzero.any():
+        return np.zeros(3), np.zeros(3)
+    lo, hi = np.full(3, -np.inf), np.full(3, np.inf)
+    for a in range(3):  # x, y, z: array axes 2, 1, 0
+        used = np.flatnonzero(nonzero.any(axis=tuple(k for k in range(3) if k != 2 - a)))
+        n = nonzero.shape[2 - a]
+        if used[0] > 0:
+            lo[a] = (used[0] - 1.5) / n
+        if used[-1] < n - 1:
+            hi[a] = (used[-1] + 2.5) / n
+    return None if np.isinf(lo).all() and np.isinf(hi).all() else (lo, hi)
+
+
 class ChannelTexture:
     """A trilinear, clamp-to-edge 3-D texture of C channels ((z, y, x, C) array) that stores
     only its channels that are non-zero at some node: the others read exactly 0 without a
@@ -166,10 +187,12 @@ class SampledMap:
         # costs no more than the flag gather and the branch: 1.00-1.19x as slow with them on
         # the bench's Gaussian pull, 0.81-0.95x on a 3-channel peel; docs/volume.md)
         zero = np.concatenate([d, 1.0 - alpha[..., None], jac.reshape(*shape, 9), galpha], axis=-1)
-        self.flags = flags = nonzero_cells(np.abs(zero).max(-1) > 0)
+        nonzero = np.abs(zero).max(-1) > 0
+        self.flags = flags = nonzero_cells(nonzero)
         skip = not flags.all() and len(self.disp.stored) > 1
         self.nonzero = mi.Float(flags.astype(np.float32).ravel()) if skip else None
         self.flag_cells = flags.shape[::-1]
+        self.read_box = read_box(nonzero)
 
     def nbytes(self, all_channels: bool = False) -> int:
         """Texture bytes at the stored bit depth: the stored channels of D 3 + α 1 + J 9 +
@@ -183,45 +206,67 @@ class SampledMap:
         lo, hi = mi.ScalarPoint3f(self.lo), mi.ScalarPoint3f(self.hi)
         return mi.Point3f((l - lo) / (hi - lo) * (n - 1) / n + 0.5 / n)
 
-    def lookup(self, p: mi.Point3f, normals: bool, active=True, alpha_gradient=True):
-        """(D, α_s, Jᵀ or None, ∇α_s or None) at world points p' (world units); lanes outside
-        ``active``, or in a cell of :func:`nonzero_cells` that is all zero, read nothing
-        (D = 0, α = 1, J = 0 there: bit for bit what the reads would give)."""
-        u = self._coords(p)
-        if self.nonzero is None:
-            return self._read(u, normals, alpha_gradient, active)
-        # a symbolic branch skips the reads in all-zero cells (on the LLVM backend too, a
-        # packet of samples with none in a displaced cell jumps over it)
-        # the cell of texel position t = u n - 1/2 (nonzero_cells): floor((floor(t) + 1) / b)
-        n, cx, cy = mi.ScalarVector3f(self.res), int(self.flag_cells[0]), int(self.flag_cells[1])
-        c = mi.Vector3u(dr.clip(dr.floor((u * n + 0.5) * (1.0 / FLAG_NODES)), 0.0,
-                                mi.ScalarVector3f(self.flag_cells) - 1.0))
-        inside = active & (dr.gather(mi.Float, self.nonzero, mi.UInt32(c.x + cx * (c.y + cy * c.z)), active) > 0)
-        return dr.if_stmt(args=(u,), cond=inside, label="volume_dk_lookup",
-                          true_fn=lambda u: self._read(u, normals, alpha_gradient),
-                          false_fn=lambda u: self._outside(u, normals, alpha_gradient))
+    def lookup(self, p: mi.Point3f, active=True):
+        """(D, α_s) at world points p' (world units); lanes outside ``active``, or in a cell of
+        :func:`nonzero_cells` that is all zero, read nothing (D = 0, α = 1 there: bit for bit
+        what the reads would give)."""
+        return self._branch(p, active, self._read, self._outside)
 
-    def _read(self, u, normals, alpha_gradient, active=True):
-        """The texture reads of :meth:`lookup` at texture coordinates u."""
+    def derivatives(self, p: mi.Point3f, alpha_gradient=True, active=True):
+        """(Jᵀ, ∇α_s or None) at world points p' (world units), the normal terms, read apart
+        from :meth:`lookup` so that a renderer reads them only where it shades; all-zero cells
+        read nothing as in :meth:`lookup` (J = 0, ∇α = 0)."""
+        return self._branch(p, active, lambda u, act: self._read_derivatives(u, alpha_gradient, act),
+                            lambda u: self._outside_derivatives(u, alpha_gradient))
+
+    def _branch(self, p, active, read, outside):
+        """``read(u, active)`` at the texture coordinates u of p', or ``outside(u)`` in the
+        all-zero cells of :func:`nonzero_cells` (when the flag grid is in use)."""
+        u = self._coords(p)
+        if self.nonzero is None and self.read_box is None:
+            return read(u, active)
+        # a symbolic branch skips the reads in all-zero cells (on the LLVM backend too, a
+        # packet of samples with none in a displaced cell jumps over it): outside the box of
+        # the flagged cells (a few comparisons) and, for reads wider than one channel, in the
+        # unflagged cells inside it (one gather of the flag grid)
+        inside = mi.Bool(active)
+        if self.read_box is not None:
+            lo, hi = (mi.ScalarPoint3f(b) for b in self.read_box)
+            inside &= dr.all((u >= lo) & (u < hi))
+        if self.nonzero is not None:
+            # the cell of texel position t = u n - 1/2 (nonzero_cells): floor((floor(t) + 1) / b)
+            n, cx, cy = mi.ScalarVector3f(self.res), int(self.flag_cells[0]), int(self.flag_cells[1])
+            c = mi.Vector3u(dr.clip(dr.floor((u * n + 0.5) * (1.0 / FLAG_NODES)), 0.0,
+                                    mi.ScalarVector3f(self.flag_cells) - 1.0))
+            inside &= dr.gather(mi.Float, self.nonzero, mi.UInt32(c.x + cx * (c.y + cy * c.z)), inside) > 0
+        return dr.if_stmt(args=(u,), cond=inside, label="volume_dk_lookup",
+                          true_fn=lambda u: read(u, True), false_fn=outside)
+
+    def _read(self, u, active=True):
+        """The D/α read of :meth:`lookup` at texture coordinates u."""
         t = self.disp.eval(u, active)
-        d, alpha = mi.Vector3f(t[0], t[1], t[2]), 1.0 - t[3]
-        if not normals:
-            return d, alpha, None, None
+        return mi.Vector3f(t[0], t[1], t[2]), 1.0 - t[3]
+
+    def _read_derivatives(self, u, alpha_gradient, active=True):
+        """The J (and ∇α) reads of :meth:`derivatives` at texture coordinates u."""
         j = self.jac.eval(u, active)
         jac_t = mi.Matrix3f(j[0], j[3], j[6], j[1], j[4], j[7], j[2], j[5], j[8])
         if not alpha_gradient:
-            return d, alpha, jac_t, None
+            return jac_t, None
         g = self.galpha.eval(u, active)
-        return d, alpha, jac_t, mi.Vector3f(g[0], g[1], g[2])
+        return jac_t, mi.Vector3f(g[0], g[1], g[2])
 
     @staticmethod
-    def _outside(u, normals, alpha_gradient):
-        """What an all-zero cell reads: D = 0, α = 1, J = 0, ∇α = 0."""
+    def _outside(u):
+        """What an all-zero cell reads: D = 0, α = 1."""
         zero = dr.zeros(mi.Float, dr.width(u.x))
-        d, alpha = mi.Vector3f(zero), zero + 1.0
-        if not normals:
-            return d, alpha, None, None
-        return d, alpha, mi.Matrix3f(zero), (mi.Vector3f(zero) if alpha_gradient else None)
+        return mi.Vector3f(zero), zero + 1.0
+
+    @staticmethod
+    def _outside_derivatives(u, alpha_gradient):
+        """What an all-zero cell reads: J = 0, ∇α = 0."""
+        zero = dr.zeros(mi.Float, dr.width(u.x))
+        return mi.Matrix3f(zero), (mi.Vector3f(zero) if alpha_gradient else None)
 
 
 def padded_box(lo, hi, res, smoothing) -> tuple[np.ndarray, np.ndarray]:
@@ -277,10 +322,14 @@ class PlacedMap:
 
 class Lookup:
     """Result of mapping world points p' through a chain: pre-image p, α (exact or α_s),
-    normal matrix B = (I + J)ᵀ of the whole chain and ∇α (None unless asked)."""
+    normal matrix B = (I + J)ᵀ of the whole chain and ∇α (None unless asked).  A lookup
+    through the D_k also keeps ``points``, the points where each D_k was read (last map
+    first), and ``factors``, each map's α there, so that
+    :meth:`DisplacementChain.with_normals` adds B and ∇α later without re-reading D."""
 
-    def __init__(self, p, alpha, B=None, galpha=None):
+    def __init__(self, p, alpha, B=None, galpha=None, points=None, factors=None):
         self.p, self.alpha, self.B, self.galpha = p, alpha, B, galpha
+        self.points, self.factors = points, factors
 
 
 class DisplacementChain:
@@ -349,17 +398,29 @@ class DisplacementChain:
         chain's B (Matrix3f) and — unless ``alpha_gradient`` is False — ∇α_s (world units)."""
         q = mi.Point3f(p)
         alpha = dr.full(mi.Float, 1.0, dr.width(p.x))
-        B = dr.identity(mi.Matrix3f) if normals else None
-        galpha = mi.Vector3f(0.0) if normals and alpha_gradient else None
-        for s in reversed(self.sampled_maps()):
-            d, a, jac_t, ga = s.lookup(q, normals, active, alpha_gradient)
-            if normals:
-                # product rule for ∇(Π α) and the chain rule B <- B (I + J)ᵀ (eq. 6, 10)
-                if galpha is not None:
-                    galpha = galpha * a + alpha * (B @ ga)
-                B = B @ (dr.identity(mi.Matrix3f) + jac_t)
+        points, factors = [], []
+        for s in reversed(self.sampled_maps()):  # eq. 9: the last map is undone first
+            d, a = s.lookup(q, active)
+            points.append(q)
+            factors.append(a)
             q, alpha = q + d, alpha * a
-        return Lookup(q, alpha, B, galpha)
+        r = Lookup(q, alpha, points=points, factors=factors)
+        return self.with_normals(r, alpha_gradient, active) if normals else r
+
+    def with_normals(self, r: Lookup, alpha_gradient: bool = True, active=True) -> Lookup:
+        """``r`` (from :meth:`approximate`) with the chain's B and ∇α_s, read at the points
+        where its D_k were read: bit for bit ``approximate(p, True)`` without its D reads."""
+        alpha = dr.full(mi.Float, 1.0, dr.width(r.p.x))
+        B = dr.identity(mi.Matrix3f)
+        galpha = mi.Vector3f(0.0) if alpha_gradient else None
+        for s, q, a in zip(reversed(self.sampled_maps()), r.points, r.factors):
+            jac_t, ga = s.derivatives(q, alpha_gradient, active)
+            # product rule for ∇(Π α) and the chain rule B <- B (I + J)ᵀ (eq. 6, 10)
+            if galpha is not None:
+                galpha = galpha * a + alpha * (B @ ga)
+            B = B @ (dr.identity(mi.Matrix3f) + jac_t)
+            alpha = alpha * a
+        return Lookup(r.p, r.alpha, B, galpha, r.points, r.factors)
 
     def displacement_range(self) -> tuple[np.ndarray, np.ndarray]:
         """Per-axis bounds (low (3,), high (3,)) on p - p' over the chain: the sums of each

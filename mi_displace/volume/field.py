@@ -72,12 +72,11 @@ class DisplacedVolume:
         """τ(v): the linear transfer ramp."""
         return dr.clip((v - self.tf_low) / (self.tf_high - self.tf_low), 0.0, 1.0)
 
-    def lookup(self, p: mi.Point3f, normals: bool = False, alpha_gradient: bool = True):
-        """Pre-image lookup through the chain in this volume's mode (``normals``: also B and,
-        with ``alpha_gradient``, ∇α_s from the D_k textures)."""
+    def lookup(self, p: mi.Point3f):
+        """Pre-image lookup through the chain in this volume's mode (exact maps or D_k)."""
         if self.mode == "reference":
             return self.chain.exact(p)
-        return self.chain.approximate(p, normals, alpha_gradient=alpha_gradient)
+        return self.chain.approximate(p)
 
     def density(self, p: mi.Point3f, lookup=None) -> mi.Float:
         """τ(O(p)) · [α >= 1/2] at world points p' (dimensionless, in [0, 1])."""
@@ -105,7 +104,9 @@ class DisplacedVolume:
     def normal(self, p: mi.Point3f, method: str, fallback: mi.Vector3f, lookup=None,
                active=True) -> mi.Vector3f:
         """Unit normal at world points p' by ``method`` (module docstring); texture reads are
-        masked by ``active`` (the renderer asks only where a slice sample is visible)."""
+        masked by ``active``.  ``lookup``: the D_k lookup of p' (:meth:`DisplacementChain.approximate`,
+        e.g. the renderer's density step at that sample), whose pre-image and read points are
+        reused, so only J (and ∇α) are read here; without it the D_k are read again."""
         if method not in NORMALS:
             raise ValueError(f"normals: must be one of {NORMALS}, got {method!r}")
         if method == "fd":
@@ -117,11 +118,13 @@ class DisplacedVolume:
                 step = mi.Vector3f(e)
                 g.append((self.smooth_field(p + step, active) - self.smooth_field(p - step, active)) / (2 * h))
             return safe_normalize(-mi.Vector3f(g[0], g[1], g[2]), fallback)
-        reusable = lookup is not None and lookup.B is not None and (method != "blend" or lookup.galpha is not None)
-        r = lookup if reusable else self.chain.approximate(p, True, active, alpha_gradient=method == "blend")
+        # the D_k pre-image: ``lookup`` if it is one (the renderer's density step), else read now
+        r = lookup if lookup is not None and lookup.points is not None else self.chain.approximate(p, active=active)
         grad = self.obj.gradient(r.p, active)
         if method == "gradient":
             return safe_normalize(-grad, fallback)
+        if r.B is None or (method == "blend" and r.galpha is None):
+            r = self.chain.with_normals(r, alpha_gradient=method == "blend", active=active)
         bent = safe_normalize(r.B @ grad, -fallback)  # eq. 6
         if method == "jacobian":
             return -bent

@@ -11,9 +11,16 @@ Primitives (parameters in local units, angles in degrees):
 * ``gaussian``  Gaussian pull, eq. 8: D = (0, 0, -amount · z · g(x, y)), g a Gaussian of
   width ``sigma`` at (0.5, 0.5) shifted to vanish on the cube's sides; above z = 1 the pull
   fades out linearly by z = 2 (C0; that space must be empty).  Invertible for amount < 1.
-* ``peel``  (Fig. 1) the part above the cut plane z = ``height`` and left of the hinge
-  x = ``hinge`` is turned about the hinge (an axis along y) by ``angle`` (0..85°); the wedge
-  it leaves is the cut (α = 0).  Limited to 0 <= y <= 1 and to ``radius`` around the hinge.
+* ``peel``  (Fig. 1, §4.3.1) the lid — the part above the cut plane z = ``height`` left of the
+  hinge x = ``hinge`` — curls open about the hinge (an axis along y): a lid point at distance
+  r from the hinge turns by θ(r) = ``angle`` · (1 - ``curl`` + ``curl`` · r / ``radius``)
+  (0..85°).  With ``curl`` = 1 (the default) the rotation grows from 0 at the hinge to
+  ``angle`` at ``radius``, so a flat lid rolls into a spiral whose far end turns over (its
+  underside, once facing down, faces up: the paper's Fig. 4b peel, whose "underside of the
+  cut surface ... is facing the light"); ``curl`` = 0 is a rigid hinge.  Each circle about the
+  hinge maps onto itself (r is kept), so the inverse is closed-form and the map keeps volume.
+  The wedge the lid leaves (0 < φ' < θ(r)) is the cut (α = 0).  Limited to 0 <= y <= 1 and to
+  ``radius`` around the hinge (the rotation fades out by 1.2 ``radius``).
 * ``slabs``  (Fig. 6) cuts along z into ``count`` slabs of the unit height, slab k moved up
   by k · ``gap``; the gaps are cuts.
 * ``wave``  D = (0, 0, amount · sin(2π (frequency x + phase))) · w(x) w(y), w a flat-top
@@ -35,7 +42,7 @@ import numpy as np
 #: Parameters (name: default) of each primitive, in local units; angles in degrees.
 PRIMITIVES = {
     "gaussian": {"amount": 0.5, "sigma": 0.15},
-    "peel": {"angle": 60.0, "hinge": 1.0, "height": 0.5, "radius": 1.5},
+    "peel": {"angle": 60.0, "hinge": 1.0, "height": 0.5, "radius": 1.5, "curl": 1.0},
     "slabs": {"count": 4.0, "gap": 0.1},
     "wave": {"amount": 0.05, "frequency": 2.0, "phase": 0.0},
     "seam": {"amount": 0.15},
@@ -65,8 +72,10 @@ def check_params(kind: str, params: dict) -> dict:
             raise ValueError(f"{kind}: parameter {name!r} must be finite, got {value}")
     if kind == "gaussian" and (not 0 <= abs(out["amount"]) < 1 or out["sigma"] <= 0):
         raise ValueError(f"gaussian: need |amount| < 1 (eq. 8 stays invertible) and sigma > 0, got {out}")
-    if kind == "peel" and (not 0 <= out["angle"] <= MAX_PEEL_ANGLE or out["radius"] <= 0):
-        raise ValueError(f"peel: angle must lie in [0, {MAX_PEEL_ANGLE}] degrees and radius > 0, got {out}")
+    if kind == "peel" and (not 0 <= out["angle"] <= MAX_PEEL_ANGLE or out["radius"] <= 0
+                           or not 0 <= out["curl"] <= 1):
+        raise ValueError(f"peel: angle must lie in [0, {MAX_PEEL_ANGLE}] degrees, radius > 0 and "
+                         f"curl in [0, 1], got {out}")
     if kind == "slabs" and (out["count"] != int(out["count"]) or not 1 <= out["count"] <= 64 or out["gap"] < 0):
         raise ValueError(f"slabs: count must be an integer in [1, 64] and gap >= 0, got {out}")
     if kind == "seam" and not 0 <= out["amount"] < 0.5:
@@ -111,18 +120,23 @@ def evaluate(kind: str, q: dict, l: mi.Point3f) -> tuple[mi.Vector3f, mi.Float]:
         g = dr.select((x >= 0) & (x <= 1) & (y >= 0) & (y <= 1), dr.maximum(g - edge, 0.0) / (1.0 - edge), 0.0)
         zf = dr.select(z <= 1.0, dr.clip(z, 0.0, 1.0), dr.clip(2.0 - z, 0.0, 1.0))
         return mi.Vector3f(zero, zero, -q["amount"] * zf * g), one
-    if kind == "peel":  # Fig. 1: rotate the lid back by beta(phi'), the wedge 0 < phi' < theta is cut
-        theta = q["angle"] * (dr.pi / 180.0)
+    if kind == "peel":  # Fig. 1: turn the lid back by beta(r, phi'); the wedge 0 < phi' < theta(r) is cut
         u, w = x - q["hinge"], z - q["height"]
-        phi = dr.atan2(w, -u)
+        phi = dr.atan2(w, -u)   # polar angle about the hinge, from -u (the lid side) towards +w
         r = dr.sqrt(u * u + w * w)
+        radius = q["radius"]
+        # the lid's rotation at distance r (kept by the map): grows with r when curled, faded
+        # out between radius and 1.2 radius
+        fade = dr.clip((1.2 * radius - r) / (0.2 * radius), 0.0, 1.0)
+        theta = q["angle"] * (dr.pi / 180.0) * (1.0 - q["curl"] + q["curl"] * dr.minimum(r / radius, 1.0)) * fade
+        # lid phi in [0, pi/2] went to [theta, theta + pi/2] (gap phi' < theta: onto the cut face
+        # phi = 0, the C0 pseudo-inverse of §4.1); the rest above the plane, [pi/2, pi], was
+        # squeezed into [theta + pi/2, pi]
         ramp_from = theta + 0.5 * dr.pi
         beta = dr.select(phi <= ramp_from, dr.clip(phi, 0.0, theta),
                          theta * (dr.pi - phi) / dr.maximum(dr.pi - ramp_from, 1e-6))
-        radius = q["radius"]
-        fade = dr.clip((1.2 * radius - r) / (0.2 * radius), 0.0, 1.0)
         inside = (y >= 0) & (y <= 1)
-        beta = dr.select(inside, beta * fade, 0.0)
+        beta = dr.select(inside, beta, 0.0)
         c, s = dr.cos(beta), dr.sin(beta)
         # rotating (u, w) back by beta: from angle phi to phi - beta (phi measured from -u to +w)
         ur, wr = u * c - w * s, w * c + u * s

@@ -38,6 +38,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.render.raster import _is_ambient, _is_delta, pixel_rays
+from mi_displace.volume.displacement import Lookup
 from mi_displace.volume.field import NORMALS, AlbedoField, DisplacedVolume
 
 MODELS = ("scatter", "surface")
@@ -45,6 +46,9 @@ MODELS = ("scatter", "surface")
 EARLY_STOP = 1e-4
 #: Most slices (refused before rendering).
 MAX_SLICES = 8192
+#: Shade a visible sample with the D_k lookup of its density step (pre-image and read points)
+#: instead of reading the D_k again; False re-reads them (the same image bit for bit, tested).
+REUSE_LOOKUP = True
 
 
 class SliceSettings:
@@ -247,12 +251,21 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
     inv_d = dr.rcp(ray.d)
     bias = 2.0 * (float((hi - lo).max()) / max(gn - 1, 1)) if gn else 0.0
 
-    def shade(x):
-        """Light scattered (scatter) or reflected (surface) towards the camera at x."""
+    # the density step's D_k lookup (pre-image, read points, α factors) goes on to the
+    # shading of the same sample, which then reads no D_k again (only J and ∇α for the normal)
+    own_albedo = s.albedo_field is not None and s.albedo_field.volume is vol
+    reuse = REUSE_LOOKUP and vol.mode == "approximation" and (
+        (s.model == "surface" and s.normals != "fd") or own_albedo)
+
+    def shade(x, r):
+        """Light scattered (scatter) or reflected (surface) towards the camera at x; ``r``:
+        the density step's lookup of x (or None)."""
         S = mi.Color3f(0.0)
         if s.model == "surface":
-            n = vol.normal(x, s.normals, -ray.d)
-        colour = s.albedo_field.albedo(x) if s.albedo_field is not None else None
+            n = vol.normal(x, s.normals, -ray.d, lookup=r)
+        colour = None
+        if s.albedo_field is not None:
+            colour = s.albedo_field.albedo(x, lookup=r if own_albedo else None)
         for i, e in enumerate(lights):
             it = dr.zeros(mi.Interaction3f)
             it.p = x
@@ -269,6 +282,24 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
         if s.model == "surface":
             return (colour if colour is not None else rho) * (S + amb)
         return (colour if colour is not None else s.albedo) * S
+
+    def density(x):
+        """Extinction at x and, with ``reuse``, its lookup as a tuple (if_stmt state)."""
+        if not reuse:
+            return extinction(vol, s, x), ()
+        r = vol.lookup(x)
+        return extinction(vol, s, x, r), (mi.Point3f(r.p), mi.Float(r.alpha), tuple(mi.Point3f(q) for q in r.points),
+                                          tuple(mi.Float(a) for a in r.factors))
+
+    def empty(x):
+        """What an empty cell gives: no extinction; a lookup of the same structure (unused)."""
+        if not reuse:
+            return mi.Float(0.0), ()
+        n = len(vol.chain.sampled_maps())
+        return mi.Float(0.0), (mi.Point3f(x), mi.Float(1.0), (mi.Point3f(x),) * n, (mi.Float(1.0),) * n)
+
+    def lookup(r):
+        return Lookup(r[0], r[1], points=list(r[2]), factors=list(r[3])) if reuse else None
 
     def cond(k, T, L):
         return hit & (k <= k1) & (T > EARLY_STOP)
@@ -287,12 +318,11 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
         # symbolic branches (they skip a SIMD packet on the LLVM backend too, not only masked
         # lanes): the displaced density (D_k, then O) only in occupied cells, the shading
         # (normal, lights) only where the sample is visible
-        sigma = dr.if_stmt(args=(x,), cond=full, true_fn=lambda x: extinction(vol, s, x),
-                           false_fn=lambda x: mi.Float(0.0), label="volume_slicer_sample")
+        sigma, r = dr.if_stmt(args=(x,), cond=full, true_fn=density, false_fn=empty, label="volume_slicer_sample")
         a = 1.0 - dr.exp(-sigma * dt)
         live = a > 0
-        S = dr.if_stmt(args=(x,), cond=live, true_fn=shade, false_fn=lambda x: mi.Color3f(0.0),
-                       label="volume_slicer_shade")
+        S = dr.if_stmt(args=(x, r), cond=live, true_fn=lambda x, r: shade(x, lookup(r)),
+                       false_fn=lambda x, r: mi.Color3f(0.0), label="volume_slicer_shade")
         L = L + dr.select(live, T * a * S, 0.0)
         T = dr.select(live, T * (1.0 - a), T)
         return dr.select(full, k + 1.0, dr.maximum(k + 1.0, k_skip)), T, L

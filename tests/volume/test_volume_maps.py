@@ -44,16 +44,55 @@ def test_exact_inverse_undoes_the_closed_form_forward_map(variant, kind):
         n, gap = q["count"], q["gap"]
         f[:, 2] = z + np.minimum(np.floor(z * n), n - 1) * gap
     elif kind == "peel":
-        th = np.radians(q["angle"])
-        u, w = x - q["hinge"], z - q["height"]
-        lid = (u < 0) & (w > 0) & (np.hypot(u, w) < q["radius"])
-        a, b = -u, w
-        f[lid, 0] = q["hinge"] - (a * np.cos(th) - b * np.sin(th))[lid]
-        f[lid, 2] = q["height"] + (a * np.sin(th) + b * np.cos(th))[lid]
+        f = _peel_forward(l, q)
     p_world, pp_world = _to_world(M_ROT, l), _to_world(M_ROT, f)
     d, alpha = m.exact(_p(pp_world))
     np.testing.assert_allclose(pp_world + _np(d), p_world, atol=2e-5)
     assert np.array(alpha).min() == 1.0                 # every displaced point has a pre-image
+
+
+def _peel_forward(l, q):
+    """The peel's forward map in closed form (maps.py): about the hinge, a point above the cut
+    plane at distance r and polar angle φ (from -x towards +z) goes to angle φ + θ(r) on the
+    lid side (φ <= 90°) and to (φ (90° - θ) + 180° θ) / 90° beyond it, at the same r;
+    θ(r) = angle (1 - curl + curl min(r / radius, 1)), faded to 0 between radius and 1.2 radius."""
+    u, w = l[:, 0] - q["hinge"], l[:, 2] - q["height"]
+    r, phi = np.hypot(u, w), np.arctan2(w, -u)
+    fade = np.clip((1.2 * q["radius"] - r) / (0.2 * q["radius"]), 0, 1)
+    th = np.radians(q["angle"]) * (1 - q["curl"] + q["curl"] * np.minimum(r / q["radius"], 1)) * fade
+    to = np.where(phi <= np.pi / 2, phi + th, (phi * (np.pi / 2 - th) + th * np.pi) / (np.pi / 2))
+    moved = (w > 0) & (l[:, 1] >= 0) & (l[:, 1] <= 1)
+    f = l.copy()
+    f[moved, 0] = (q["hinge"] - r * np.cos(to))[moved]
+    f[moved, 2] = (q["height"] + r * np.sin(to))[moved]
+    return f
+
+
+@pytest.mark.parametrize("params", [{"curl": 1.0}, {"curl": 0.0}, {"curl": 0.5, "angle": 85.0},
+                                    {"curl": 1.0, "angle": 80.0, "radius": 0.6}])
+def test_peel_inverse_undoes_its_forward_map(variant, params):
+    """The curling peel (and the rigid hinge, curl 0) with the hinge inside the cube: lid,
+    the squeezed part right of the hinge and (radius 0.6) the fade zone all come back; the
+    lid's underside turns by θ(r) + atan(r θ'(r)) > 90° at the radius when fully curled."""
+    from mi_displace.volume.displacement import PlacedMap
+
+    m = PlacedMap("peel", {"hinge": 0.7, "height": 0.4, **params}, to_world=M_ROT)
+    l = RNG.uniform(0.0, 1.0, (6000, 3))
+    f = _peel_forward(l, m.params)
+    assert (np.abs(f - l).max(axis=1) > 1e-3).mean() > 0.4             # most points move
+    d, alpha = m.exact(_p(_to_world(M_ROT, f)))
+    np.testing.assert_allclose(_to_world(M_ROT, f) + _np(d), _to_world(M_ROT, l), atol=3e-5)
+    assert np.array(alpha).min() == 1.0
+    # the underside (z = height, left of the hinge) as a curve: its direction at the radius
+    q = m.params
+    s = np.linspace(0.5, 1.0, 201) * q["radius"]
+    under = _peel_forward(np.stack([q["hinge"] - s, np.full_like(s, 0.5), q["height"] + 1e-9 + 0 * s], -1), q)
+    t = np.diff(under[:, [0, 2]], axis=0)
+    turn = np.degrees(np.arctan2(t[-1, 1], -t[-1, 0]))
+    expected = q["angle"] + np.degrees(np.arctan(np.radians(q["angle"]) * q["curl"]))  # θ(radius) = angle
+    assert abs(turn - expected) < 1.0
+    if q["curl"] == 1.0:
+        assert turn > 90                                                 # turned over
 
 
 def test_cuts_have_alpha_zero(variant):
@@ -63,10 +102,14 @@ def test_cuts_have_alpha_zero(variant):
     _, a = slabs.exact(_p([[0.5, 0.5, 0.6], [0.5, 0.5, 0.4], [0.5, 0.5, 0.8]]))
     assert list(np.array(a)) == [0.0, 1.0, 1.0]        # the gap (0.5, 0.7) is the cut
     peel = PlacedMap("peel", {"angle": 60, "hinge": 1.0, "height": 0.5})
-    # polar angle 30 deg from the hinge lies in the opened wedge (0, 60)
-    _, a = peel.exact(_p([[1 - 0.3 * np.cos(np.radians(30)), 0.5, 0.5 + 0.3 * np.sin(np.radians(30))],
-                          [0.5, 0.5, 0.3]]))
-    assert list(np.array(a)) == [0.0, 1.0]
+    # curled: at r = 1.2 from the hinge the wedge is (0, 60 * 1.2 / 1.5) = (0, 48) degrees
+    # (30 degrees lies in it), at r = 0.3 it is (0, 12) (30 degrees is lid)
+    wedge = [[1 - r * np.cos(np.radians(30)), 0.5, 0.5 + r * np.sin(np.radians(30))] for r in (1.2, 0.3)]
+    d, a = peel.exact(_p(wedge + [[0.5, 0.5, 0.3]]))
+    assert list(np.array(a)) == [0.0, 1.0, 1.0]
+    # the C0 pseudo-inverse of §4.1: the gap maps onto the cut face (z = height) at the same r
+    pre = np.array(wedge[0]) + _np(d)[0]
+    assert abs(pre[2] - 0.5) < 1e-6 and abs(np.hypot(pre[0] - 1, pre[2] - 0.5) - 1.2) < 1e-5
     seam = PlacedMap("seam", {"amount": 0.2})
     _, a = seam.exact(_p([[0.5, 0.5, 1.0], [0.5, 0.5, 0.0], [0.9, 0.5, 1.0]]))
     assert list(np.array(a)) == [0.0, 1.0, 1.0]
@@ -97,7 +140,7 @@ def test_jacobian_texture_matches_finite_differences(variant):
     # away from the window's kinks (x, y in 0.1 / 0.9) by more than one D_k voxel
     l = RNG.uniform(0.25, 0.75, (500, 3))
     pw = _to_world(M_ROT, l)
-    _, _, jac, _ = s.lookup(_p(pw), True)
+    jac, _ = s.derivatives(_p(pw), False)
     # lookup gives Jᵀ; entries that are 0 in every lane (unstored channels) may be one literal lane
     J = np.stack([np.broadcast_to(np.array(jac[j][i]), 500) for i in range(3) for j in range(3)], -1).reshape(-1, 3, 3)
     h = 1e-3
