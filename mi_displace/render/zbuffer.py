@@ -497,7 +497,11 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
         if test is not None:
             inside = dr.if_stmt((inside,), inside, lambda m: (m & test(index, b1, b2, m),),
                                 lambda m: (m,), label="raster_alpha")[0]
-        dr.scatter_reduce(dr.ReduceOp.Min, keys, value, index, inside)
+        # real atomics (Direct): the lanes rarely meet on a sample, and the default for a
+        # buffer this small (Expand: a copy per worker thread, reduced at the end) costs
+        # more memory traffic (measured: -9 % on the donut's slices, -19 % wall on a 1M-
+        # triangle mesh at 512^2, same keys)
+        dr.scatter_reduce(dr.ReduceOp.Min, keys, value, index, inside, mode=dr.ReduceMode.Direct)
 
     tri = dr.arange(mi.UInt32, n_faces)
     face, c = _triangles(geom, clip, tri)
