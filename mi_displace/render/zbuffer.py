@@ -28,8 +28,9 @@ The pipeline of a GPU, written as data-parallel array code (issue 18):
    [near, far] are rejected.  Edges are evaluated in a canonical vertex order, so the two
    triangles sharing an edge get bit-exactly opposite values: no sample falls through a
    crack (samples exactly on an edge go to both; the depth test decides).
-5. **Depth test**: an atomic minimum (``dr.scatter_reduce(ReduceOp.Min)`` on UInt64) over
-   keys ``(float32 bits of the view depth) << 32 | triangle id``.  The depth is the
+5. **Depth test**: an atomic minimum (``dr.scatter_reduce(ReduceOp.Min)`` on UInt64, plain
+   atomics: ``ReduceMode.Direct``) over keys ``(float32 bits of the view depth) << 32 |
+   triangle id``.  The depth is the
    *linear* view-space z stored as a float32 (positive floats order like their bits):
    floating point keeps 24 bits of relative precision at every distance, like a log
    depth, with no [near, far] normalisation to lose precision far away.  Equal depths go
