@@ -28,8 +28,9 @@ The pipeline of a GPU, written as data-parallel array code (issue 18):
    [near, far] are rejected.  Edges are evaluated in a canonical vertex order, so the two
    triangles sharing an edge get bit-exactly opposite values: no sample falls through a
    crack (samples exactly on an edge go to both; the depth test decides).
-5. **Depth test**: an atomic minimum (``dr.scatter_reduce(ReduceOp.Min)`` on UInt64) over
-   keys ``(float32 bits of the view depth) << 32 | triangle id``.  The depth is the
+5. **Depth test**: an atomic minimum (``dr.scatter_reduce(ReduceOp.Min)`` on UInt64, plain
+   atomics: ``ReduceMode.Direct``) over keys ``(float32 bits of the view depth) << 32 |
+   triangle id``.  The depth is the
    *linear* view-space z stored as a float32 (positive floats order like their bits):
    floating point keeps 24 bits of relative precision at every distance, like a log
    depth, with no [near, far] normalisation to lose precision far away.  Equal depths go
@@ -307,11 +308,12 @@ def screen_boxes(view: View, geom: Geometry, clip: mi.Point3f, tri: mi.UInt32):
 def _row_span(view: View, c: list, Y: mi.UInt32, x0: mi.Int32, x1: mi.Int32):
     """Samples [xs, xe) of grid row ``Y`` that triangles with clip-space vertices ``c`` may
     cover, within their box columns [x0, x1): the row's centre line cut with the projected
-    edges (each edge's point nearest to the line in y, so a superset of the exact span),
-    widened by :data:`SPAN_MARGIN` (the homogeneous edge test of a sliver triangle can
-    round a sample inside that lies a fraction of a cell outside its projection) and a
-    relative rounding margin; the whole box row where a vertex lies behind the near plane.
-    The inside test still decides."""
+    edges it meets (those whose y range reaches within :data:`SPAN_MARGIN` of the line:
+    each one's point nearest to the line, so a superset of the exact span, whose ends lie
+    on such edges), widened by :data:`SPAN_MARGIN` (the homogeneous edge test of a sliver
+    triangle can round a sample inside that lies a fraction of a cell outside its
+    projection) and a relative rounding margin; the whole box row where a vertex lies
+    behind the near plane.  The inside test still decides."""
     y = mi.Float(Y) + 0.5
     g = [view.grid(p) for p in c]
     lo, hi = mi.Float(dr.inf), mi.Float(-dr.inf)
@@ -319,8 +321,11 @@ def _row_span(view: View, c: list, Y: mi.UInt32, x0: mi.Int32, x1: mi.Int32):
         (ax, ay), (bx, by) = g[i], g[(i + 1) % 3]
         flat = ay == by
         s = dr.clip((y - ay) / dr.select(flat, 1.0, by - ay), 0.0, 1.0)
+        # only edges the row's line meets (within the margin) bound the span
+        meets = (y >= dr.minimum(ay, by) - SPAN_MARGIN) & (y <= dr.maximum(ay, by) + SPAN_MARGIN)
         for x in (ax + s * (bx - ax), dr.select(flat, bx, ax + s * (bx - ax))):
-            lo, hi = dr.minimum(lo, x), dr.maximum(hi, x)
+            lo = dr.select(meets, dr.minimum(lo, x), lo)
+            hi = dr.select(meets, dr.maximum(hi, x), hi)
     margin = SPAN_MARGIN + 1e-5 * (dr.abs(lo) + dr.abs(hi))
     xs = mi.Int32(dr.clip(dr.ceil(lo - 0.5 - margin), mi.Float(x0), mi.Float(x1)))
     xe = mi.Int32(dr.clip(dr.floor(hi - 0.5 + margin) + 1, mi.Float(x0), mi.Float(x1)))
@@ -486,12 +491,18 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
             if floor is not None:
                 inside &= key > dr.gather(mi.UInt64, floor, index, inside)
         # early depth test (a read; the minimum only falls, so a stale value is safe): a
-        # fragment behind the stored one runs no alpha test and no atomic
+        # fragment behind the stored one runs no alpha test and no atomic.  The alpha test
+        # runs under a symbolic if, which a SIMD packet with no fragment left jumps over.
         value = key if with_ids else depth
         inside &= value < dr.gather(type(value), keys, index, inside)
         if test is not None:
-            inside &= test(index, b1, b2, inside)
-        dr.scatter_reduce(dr.ReduceOp.Min, keys, value, index, inside)
+            inside = dr.if_stmt((inside,), inside, lambda m: (m & test(index, b1, b2, m),),
+                                lambda m: (m,), label="raster_alpha")[0]
+        # real atomics (Direct): the lanes rarely meet on a sample, and the default for a
+        # buffer this small (Expand: a copy per worker thread, reduced at the end) costs
+        # more memory traffic (measured: -9 % on the donut's slices, -19 % wall on a 1M-
+        # triangle mesh at 512^2, same keys)
+        dr.scatter_reduce(dr.ReduceOp.Min, keys, value, index, inside, mode=dr.ReduceMode.Direct)
 
     tri = dr.arange(mi.UInt32, n_faces)
     face, c = _triangles(geom, clip, tri)

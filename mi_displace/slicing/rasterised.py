@@ -174,11 +174,13 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
 
         def leaving(tri, active):   # seen from inside: the ray runs along the outward normal
             fn = walls.face_normal(dr.gather(mi.UInt32, bottoms, tri, active), active)
-            return lambda sample, b1, b2, active: active & dr.gather(mi.Bool, covered, sample, active) & (
+            return lambda sample, b1, b2, active: active & (
                 dr.dot(dr.gather(mi.Vector3f, ray.d, sample, active), fn) > 0)
 
-        base, bclip = zbuffer.rasterise(view, bgeom, True, aa=aa, alpha=leaving)
-        found = base != zbuffer.EMPTY
+        # samples whose ray misses the volume start at the nearest key: nothing drawn there
+        base, bclip = zbuffer.rasterise(view, bgeom, True, aa=aa, alpha=leaving,
+                                        initial=dr.select(covered, initial, 0))
+        found = covered & (base != zbuffer.EMPTY)
         tri = mi.UInt32(base & low)
         bary, p = _resolve(view, aa, bclip, bgeom, tri, found, ray)
         hit = _store(hit, found, walls, dr.gather(mi.UInt32, bottoms, tri, found), bary, p)
@@ -188,6 +190,10 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
         mine = covered & (choice == index)
         if not dr.any(mine):
             continue
+        # a fragment of another family's sample is discarded: there the buffer starts at
+        # the nearest key, so the early depth test rejects every fragment before its alpha
+        # test (and the hierarchical z skips triangles with no sample of this family)
+        start = dr.select(mine, initial, 0)
         slices = volume.families[fam][0]
         # drawn: the slice triangles (not the walls) whose screen box holds a sample of
         # this family
@@ -205,7 +211,6 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
             ramps = [dr.gather(mi.Float, slices.ramp, v, active) for v in idx]
 
             def test(sample, b1, b2, active):
-                active = active & dr.gather(mi.Bool, mine, sample, active)
                 b0 = 1.0 - b1 - b2
                 uv = b0 * uvs[0] + b1 * uvs[1] + b2 * uvs[2]
                 ramp = b0 * ramps[0] + b1 * ramps[1] + b2 * ramps[2]
@@ -213,7 +218,7 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
 
             return test
 
-        keys, clip = zbuffer.rasterise(view, geom, True, aa=aa, alpha=alpha, initial=initial)
+        keys, clip = zbuffer.rasterise(view, geom, True, aa=aa, alpha=alpha, initial=start)
         found = mine & ((keys & low) != low)
         tri = mi.UInt32(keys & low)
         bary, p = _resolve(view, aa, clip, geom, tri, found, ray)

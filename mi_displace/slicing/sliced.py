@@ -45,11 +45,13 @@ class Hit:
     su: mi.Vector3f
     sv: mi.Vector3f
 
+    def fields(self) -> tuple:
+        """(found, p, uv, n, su, sv)."""
+        return self.found, self.p, self.uv, self.n, self.su, self.sv
+
     def select(self, mask: mi.Bool, other: "Hit") -> "Hit":
         """Per lane ``self`` where ``mask``, else ``other``."""
-        return Hit(*(dr.select(mask, a, b) for a, b in
-                     zip((self.found, self.p, self.uv, self.n, self.su, self.sv),
-                         (other.found, other.p, other.uv, other.n, other.su, other.sv))))
+        return Hit(*(dr.select(mask, a, b) for a, b in zip(self.fields(), other.fields())))
 
 
 class SlicedVolume:
@@ -177,7 +179,12 @@ class SlicedVolume:
         if self.frame is None:
             return self.find(origin, d, choice, active)
         use, drawn = self.frame.lookup(origin, d, active)
-        return drawn.select(use, self.find(origin, d, choice, mi.Bool(active) & ~use))
+        walk = mi.Bool(active) & ~use
+        # under a symbolic if: a SIMD packet of frame samples only jumps over the walk
+        walked = dr.if_stmt((origin, d, choice, walk), walk,
+                            lambda o, w, c, m: self.find(o, w, c, m).fields(),
+                            lambda o, w, c, m: drawn.fields(), label="slicing_walk")
+        return drawn.select(use, Hit(*walked))
 
     def _find_screen(self, origin, d, active):
         """§3.3: planes p . d = k delta clipped to the volume (the base's exact coordinates)."""

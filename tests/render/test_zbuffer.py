@@ -205,3 +205,44 @@ def test_empty_scene_shows_the_environment(variant):
     scene = load({}, lights=("point", "sun", "ambient"))
     zb = render(scene, visibility="zbuffer", shadows="map")
     assert np.array_equal(zb, render(scene)) and np.allclose(zb, 0.2)
+
+
+def random_triangles(n=300, seed=1):
+    """Triangles of every shape and size, slivers included, some crossing the near plane
+    and some behind the camera of :func:`camera` (at y = -5, looking along +y)."""
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform([-3, -6, -2], [3, 4, 3], (n, 3))
+    size = np.exp(rng.uniform(np.log(0.02), np.log(4.0), (n, 1, 1)))
+    offsets = rng.normal(size=(n, 3, 3)) * size
+    offsets[: n // 4, 2] = offsets[: n // 4, 0] + 1e-3 * offsets[: n // 4, 2]   # slivers
+    vertices = (centres[:, None] + offsets).reshape(-1, 3)
+    return make_mesh("random", vertices, np.arange(3 * n).reshape(n, 3))
+
+
+def test_row_spans_cover_every_sample_the_box_does(variant, monkeypatch):
+    """The row threads visit only each row's span (the edges the row meets): the same keys
+    as the brute-force enumeration of every candidate of each triangle's box (every
+    triangle through the one-thread loop, MEDIUM raised), on ordinary meshes, slivers,
+    triangles across and behind the near plane, with an alpha test, both key kinds and
+    sample orders."""
+    ground = quad("ground", [[-50, -50, -1], [50, -50, -1], [50, 50, -1], [-50, 50, -1]])
+    behind = quad("behind", [[-3, -9, 0], [3, -9, 0], [3, -9, 3], [-3, -9, 3]])
+    scenes = [(load({"ground": ground, "behind": behind}, camera(origin=(0, -5, 0.2))), 1),
+              (load({"r": random_triangles()}, camera(res=(72, 56))), 1),
+              (load({"r": random_triangles(seed=2)}, sensor_of("orthographic")), 2),
+              (load({"r": random_triangles(seed=3)}, sensor_of("crop")), 2)]
+
+    def checker(t, active):   # discard fragments on a checker of sample indices
+        return lambda s, b1, b2, a: ((s // 3 + t) % 2) == 0
+
+    for scene, aa in scenes:
+        geom = zbuffer.gather_geometry(scene.shapes())
+        view = zbuffer.view_from_sensor(scene.sensors()[0], aa)
+        for kw in ({}, {"with_ids": False}, {"alpha": checker}):
+            monkeypatch.setattr(zbuffer, "MEDIUM", 64)
+            rows, _ = zbuffer.rasterise(view, geom, aa=aa, **kw)
+            monkeypatch.setattr(zbuffer, "MEDIUM", 1 << 30)
+            boxes, _ = zbuffer.rasterise(view, geom, aa=aa, **kw)
+            drawn = np.array(rows) != (zbuffer.EMPTY if kw.get("with_ids", True) else 0xFFFFFFFF)
+            assert drawn.mean() > 0.1
+            assert np.array_equal(np.array(rows), np.array(boxes)), kw
