@@ -71,6 +71,11 @@ def test_constant_height_table_is_analytic(variant):
     np.testing.assert_allclose(bent.mvm_full, math.asin((R - D * (1 - H)) / R), atol=2e-6)
     # the uncompressed table is float32 VDM + MVM: (n_theta + 1) values per row and curvature
     assert flat.table_bytes() == 4 * 4 * 4 * (8 + 1) * np.dtype(np.float32).itemsize
+    # 16 weight columns are stored (svd_terms, mvm_terms <= 16, docs/vdm.md), fewer only
+    # where the table has fewer columns (2 curvatures x 9 = 18 here; 9 above)
+    two = build.build(heights, build.VDMSpec(res=4, n_theta=8, n_phi=4, n_curv=2, depth=D,
+                                             c_range=(0.0, c)))
+    assert (two.compressed.k_stored, flat.compressed.k_stored) == (16, 9)
 
 
 def test_reconstruction_rmse_is_the_direct_residual(variant):
