@@ -53,7 +53,7 @@ declare -A SELECTION=(
   [mi_displace/vdm/curvature.py]="tests/vdm/test_vdm_curvature.py"
   [mi_displace/vdm/frame.py]="tests/vdm/test_vdm_frame.py tests/vdm/test_vdm_baselines.py tests/vdm/test_vdm_unseen.py"
   [mi_displace/vdm/lookup.py]="tests/vdm/test_vdm_lookup.py tests/vdm/test_vdm_unseen.py tests/vdm/test_vdm_plugin.py::test_silhouettes_and_relief_follow_true_displacement tests/vdm/test_vdm_plugin.py::test_grazing_views_and_deep_relief tests/vdm/test_vdm_plugin.py::test_curvature_beyond_range_is_clamped_and_counted tests/vdm/test_vdm_plugin.py::test_depth_zero_is_the_nested_material"
-  [mi_displace/vdm/steps.py]="tests/vdm/test_vdm_unseen.py tests/vdm/test_vdm_plugin.py::test_silhouettes_and_relief_follow_true_displacement tests/vdm/test_vdm_plugin.py::test_grazing_views_and_deep_relief tests/vdm/test_vdm_plugin.py::test_curvature_beyond_range_is_clamped_and_counted tests/vdm/test_vdm_plugin.py::test_depth_zero_is_the_nested_material"
+  [mi_displace/vdm/steps.py]="tests/vdm/test_vdm_steps.py tests/vdm/test_vdm_unseen.py tests/vdm/test_vdm_plugin.py::test_silhouettes_and_relief_follow_true_displacement tests/vdm/test_vdm_plugin.py::test_grazing_views_and_deep_relief tests/vdm/test_vdm_plugin.py::test_curvature_beyond_range_is_clamped_and_counted tests/vdm/test_vdm_plugin.py::test_depth_zero_is_the_nested_material"
   [mi_displace/core/dicing.py]="tests/core/test_dicing.py"
 )
 
