@@ -1,5 +1,6 @@
 """Zero-curvature VDM by ray casting (paper §3.1) against analytic and brute-force truth."""
 import math
+import re
 
 import numpy as np
 import pytest
@@ -126,3 +127,15 @@ def test_periodicity_warning_on_a_four_texel_wide_tile():
     # below 4 texels the ratio says nothing (at most n - 1 < 4): no warning
     assert table.periodicity_warning(ramp[:3], "vdm", (1, 1)) is None
     assert table.periodicity_warning(np.tile(np.linspace(0.0, 1.0, 4), (64, 1)), "vdm", (1, 1)) is None
+
+
+def test_heights_just_outside_the_unit_interval_are_clipped_not_refused():
+    tol = table.HEIGHT_TOLERANCE
+    h = np.array([[-0.9 * tol, 0.5], [0.25, 1 + 0.9 * tol]], np.float32)
+    np.testing.assert_array_equal(table.check_heights(h), [[0.0, 0.5], [0.25, 1.0]])
+    for bad, shown in ((-2 * tol, "-0.002..1"), (1 + 2 * tol, "0..1.002")):
+        h = np.array([[0.0, 1.0], [0.5, bad]], np.float32)
+        message = (f"vdm: 'height' values must lie in [0, 1] (1 = the reference surface), got "
+                   f"{shown}; rescale the height map (or use 'depth')")
+        with pytest.raises(ValueError, match=f"^{re.escape(message)}$"):
+            table.check_heights(h)
