@@ -26,8 +26,11 @@
 # seed of a resumed sample is the stored one).
 # --resume keeps the module's mutmut cache and refreshes the tree from HEAD (also undoing
 # the mutant of a run that was stopped): mutmut keeps the killed mutants, retests the
-# survivors, then goes on with the untested (commit new tests first); a sampled module
-# stays sampled (only its drawn mutants run).
+# survivors and timeouts, then goes on with the untested (commit new tests first); a
+# sampled module stays sampled (only its drawn mutants run).
+# A mutant's tests time out after 10x the baseline run, at least 10 x MUTATION_MIN_BASELINE
+# (default 30) seconds: the baseline runs with Dr.Jit's kernel cache warm, a mutant that
+# changes a kernel recompiles it.
 # The run stops after --minutes (default 60, shared by all modules of one call) and
 # prints per module: mutants, killed, survived, timed out, untested, score, run time.
 # --show prints each mutant's changed line (scripts/mutation_cache.py).  Never run
@@ -62,7 +65,7 @@ export PYTHONDONTWRITEBYTECODE=1 MI_DISPLACE_TEST_VARIANTS=llvm_ad_rgb PATH="$ro
     PYTHONPATH="$root/scripts"
 dir_of() { echo "out/mutation/$(echo "${1#mi_displace/}" | tr / _ | sed 's/\.py$//')"; }
 
-minutes=60 resume=0 report=0 sample=0 seed=
+minutes=60 resume=0 report=0 sample=0 seed= min_baseline=${MUTATION_MIN_BASELINE:-30}
 while [ $# -gt 0 ]; do
   case $1 in
     --minutes) minutes=$2; shift 2 ;;
@@ -89,7 +92,7 @@ done
 if [ $report = 1 ] && [ ${#modules[@]} = 0 ]; then
   for d in out/mutation/*/MODULE; do [ -e "$d" ] && modules+=("$(cat "$d")"); done
 fi
-[ ${#modules[@]} -gt 0 ] || { sed -n 2,37p "$0"; exit 2; }
+[ ${#modules[@]} -gt 0 ] || { sed -n 2,40p "$0"; exit 2; }
 
 untested() {  # the untested mutants of scratch copy $1 (of its sample, if it has one)
   python -c "import sqlite3, sys; sys.path.insert(0, 'scripts'); import mutation_cache as m
@@ -109,9 +112,9 @@ if [ $report = 0 ]; then
         echo "$module: its sample was drawn with seed $stored, not $seed" >&2; exit 2
       fi
       rm -rf "$work/tests" && git archive HEAD | tar -x -C "$work"
-      # retest the survivors even where the tests did not change (e.g. a new runner)
+      # retest the survivors and timeouts even where the tests did not change (a new runner)
       python -c "import sqlite3; db = sqlite3.connect('$work/.mutmut-cache'); db.execute(
-          \"update Mutant set status = 'untested' where status = 'bad_survived'\"); db.commit()"
+          \"update Mutant set status = 'untested' where status in ('bad_survived', 'bad_timeout')\"); db.commit()"
     else
       rm -rf "$work" && mkdir -p "$work"
       git archive HEAD | tar -x -C "$work"
@@ -119,6 +122,14 @@ if [ $report = 0 ]; then
     fi
     echo "$module" > "$work/MODULE"
     echo "${TESTS[$module]}" > "$work/TESTS"
+    # mutmut kills a mutant's tests after 10x the baseline run, which ran with Dr.Jit's
+    # kernel cache warm; a mutant that changes a kernel recompiles it, and on the loaded
+    # machine that took longer (curvature.py: 74 s): a floor on the baseline (mutmut reads
+    # this hook from the working directory) keeps such mutants from counting as timeouts
+    cat > "$work/mutmut_config.py" <<PY
+def pre_mutation(context):
+    context.config.baseline_time_elapsed = max(context.config.baseline_time_elapsed, $min_baseline)
+PY
     runner="bash -c 'python -m pytest -x -q -p no:cacheprovider -p mutation_nogc ${TESTS[$module]} || exit 1'"
     if [ "$sample" -gt 0 ]; then
       [ -n "$stored" ] || python scripts/mutation_cache.py register "$work"
