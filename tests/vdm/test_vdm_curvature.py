@@ -79,3 +79,23 @@ def test_concave_and_occlusion_rules(variant):
     # MVM decreases with curvature (rays escape more easily)
     d2, m2 = _resample(t, 8 * 64, 8, [0.5, 1.0, 2.0, 4.0], 0.3)
     assert np.all(np.diff(m2, axis=1) <= 1e-6)
+
+
+# --- mutants that survived the tests above (scripts/mutation.sh, docs/testing.md) ---------
+
+def test_depth_zero_resamples_to_zero(variant):
+    """D = 0 (flat_distances' zeros): every curved distance is 0 (the chord r of l = 0) and
+    every ray reaches the surface."""
+    n_rows, n_theta = 16, 4
+    d, m = _resample(np.zeros((n_rows, n_theta), np.float32), n_rows, n_theta, [-1.0, 0.0, 2.0], 0.0)
+    np.testing.assert_array_equal(d, 0)
+    assert np.all(np.isfinite(m)) and np.all(m > 0)
+
+
+def test_sinc_and_curvature_grid(variant):
+    x = np.array([0.0, 1e-5, 5e-5, 2e-4, 0.3, -2.0])
+    np.testing.assert_allclose(curvature.sinc(x), np.where(x == 0, 1.0, np.sin(x) / np.where(x == 0, 1, x)),
+                               rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(curvature.sinc(mi.Float(x))), curvature.sinc(x), rtol=1e-6)
+    np.testing.assert_allclose(curvature.curvature_grid(-1.0, 2.0, 4), [-1.0, 0.0, 1.0, 2.0])
+    np.testing.assert_allclose(curvature.curvature_grid(-1.0, 2.0, 1), [0.5])
