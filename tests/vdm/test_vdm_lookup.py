@@ -59,6 +59,8 @@ def test_texel_centres_give_the_table(tables):
         np.testing.assert_allclose(_mvm(lk, x, y, phi, c), mvm[k, j, i, ci], atol=2e-5)
     assert lk.nbytes == data.compressed.nbytes(SVD, MVM)
     assert (lk.c_lo, lk.c_hi) == (-1.0, 2.0)
+    # the largest sampled view angle (step 3 clamps light angles to it)
+    np.testing.assert_allclose(lk.theta_max, thetas[-1], rtol=1e-12)
 
 
 def test_interpolation_wrapping_and_clamping(tables):
