@@ -135,6 +135,8 @@ def test_is_curved():
     assert not mc.is_curved(pos, faces)                      # planar, any orientation
     assert not mc.is_curved(pos, faces[::-1, ::-1])          # flipped normals: still +-n
     assert not mc.is_curved(pos, faces[:1])                  # one face
+    fold = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    assert mc.is_curved(fold, np.array([[0, 1, 2], [0, 3, 1]]))   # two faces at 90 deg
     bent = pos + np.array([0.0, 0.0, 1.0]) * (uv[:, :1] ** 2)
     assert mc.is_curved(bent, faces)
     # the tolerance bounds the second eigenvalue of the normals' scatter matrix
