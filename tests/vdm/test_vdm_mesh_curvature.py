@@ -166,3 +166,25 @@ def test_per_corner_normals_are_welded():
     np.testing.assert_allclose(cmax_s, cmax_w[split], atol=1e-9)
     np.testing.assert_allclose(cmin_s, cmin_w[split], atol=1e-9)
     np.testing.assert_allclose(Ks, Kw[split], atol=1e-9)
+
+
+def test_cylinder_with_helical_edges():
+    """Edges at 45 deg to the principal directions (every face's shape operator has an
+    off-diagonal term): along the axis c = 0, around it c = 1/r."""
+    r, n = 0.5, 17
+    s, t = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="xy")
+    phi, z = 0.8 * (s + t).ravel(), 0.8 * (s - t).ravel()
+    pos = np.stack([r * np.cos(phi), r * np.sin(phi), z], 1)
+    nrm = np.stack([np.cos(phi), np.sin(phi), 0 * phi], 1)
+    i = np.arange(n - 1)
+    a = (i[None, :] + n * i[:, None]).ravel()
+    faces = np.concatenate([np.stack([a, a + 1, a + n + 1], 1), np.stack([a, a + n + 1, a + n], 1)])
+    K, cmax, cmin = mc.curvature_tensors(pos, nrm, faces)
+    inner = ((s > 0) & (s < 1) & (t > 0) & (t < 1)).ravel()
+    axis = np.array([0.0, 0.0, 1.0])
+    around = np.stack([-np.sin(phi), np.cos(phi), 0 * phi], 1)
+    np.testing.assert_allclose(np.einsum("i,vij,j->v", axis, K, axis)[inner], 0, atol=0.02 / r)
+    np.testing.assert_allclose(np.einsum("vi,vij,vj->v", around, K, around)[inner], 1 / r,
+                               rtol=0.02)
+    np.testing.assert_allclose(cmax[inner], 1 / r, rtol=0.02)
+    np.testing.assert_allclose(cmin[inner], 0, atol=0.02 / r)
