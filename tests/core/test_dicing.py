@@ -290,3 +290,17 @@ def test_diced_mesh_vertices_are_all_used():
     np.testing.assert_array_equal(np.unique(md.faces), np.arange(len(md.src)))
     # barycentric coordinates of points on their source triangle
     assert md.bary.min() >= 0 and np.allclose(md.bary.sum(1), 1)
+
+
+def test_face_estimate_is_the_face_count():
+    """The face budget is checked on estimate_quad_faces before any face is built: it
+    must count exactly what quad_faces makes (simple patches, thin ones, any side rates)."""
+    rng = np.random.default_rng(6)
+    e = rng.integers(1, 7, (200, 4))
+    nu, nv = rng.integers(0, 8, 200), rng.integers(0, 8, 200)
+    e[:20], nu[:20], nv[:20] = 1, 1, 1                     # simple two-triangle patches
+    assert dicing.estimate_quad_faces(e, nu, nv) == len(dicing.quad_faces(e, nu, nv)["faces"])
+    for i in range(0, 200, 7):                             # and patch by patch
+        one = slice(i, i + 1)
+        assert dicing.estimate_quad_faces(e[one], nu[one], nv[one]) == \
+            len(dicing.quad_faces(e[one], nu[one], nv[one])["faces"])
