@@ -304,3 +304,17 @@ def test_face_estimate_is_the_face_count():
         one = slice(i, i + 1)
         assert dicing.estimate_quad_faces(e[one], nu[one], nv[one]) == \
             len(dicing.quad_faces(e[one], nu[one], nv[one])["faces"])
+
+
+def test_thin_lens_sensor_is_measured_through_the_lens_centre(variant):
+    """A thin lens's chief rays (through the centre of the aperture) are the pinhole's: the
+    same pixel size and frustum as a perspective sensor of the same field of view."""
+    pin = dicing.sensor_view(mi.load_dict(camera([0, -3.2, 0], res=128)))
+    lens = dict(camera([0, -3.2, 0], res=128), type="thinlens", fov=39.6, aperture_radius=0.2,
+                focus_distance=3.2)
+    thin = dicing.sensor_view(mi.load_dict(lens))
+    assert not thin.orthographic
+    np.testing.assert_allclose(thin.origin, pin.origin, atol=1e-6)
+    np.testing.assert_allclose(thin.axes, pin.axes, atol=1e-5)
+    assert thin.pixel == pytest.approx(pin.pixel, rel=1e-4)
+    np.testing.assert_allclose(thin.half, pin.half, rtol=1e-4)
