@@ -62,6 +62,10 @@ def test_mesh_patches_with_random_edge_rates_are_watertight():
     assert m.is_watertight and m.is_winding_consistent and m.euler_number == 2
     # every base edge carries exactly its own segment count: E' = sum over edges + interior
     assert len(np.unique(md.groups)) == len(md.src)
+    # every vertex is used (trimesh's merge hides unused ones from the Euler number), at
+    # barycentric coordinates on its source triangle
+    np.testing.assert_array_equal(np.unique(md.faces), np.arange(len(md.src)))
+    assert md.bary.min() >= 0 and np.allclose(md.bary.sum(1), 1)
 
 
 @pytest.mark.parametrize("e,m", [(1, 0), (5, 0), (3, 7), (8, 2), (4, 4)])
@@ -279,17 +283,6 @@ def test_diced_vertices_are_all_used_and_inside_the_domain(variant, name):
     if name == "plane":
         edges = np.unique(np.sort(d.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), 1), axis=0)
         assert len(d.uv) - len(edges) + len(d.faces) == 1
-
-
-def test_diced_mesh_vertices_are_all_used():
-    ico = trimesh.creation.icosphere(1)
-    weld = np.arange(len(ico.vertices))
-    uniq, side = dicing.mesh_edges(ico.faces, weld)
-    seg = np.random.default_rng(5).integers(1, 9, len(uniq))
-    md = dicing.dice_mesh(ico.faces, weld, seg, side, 1.0)
-    np.testing.assert_array_equal(np.unique(md.faces), np.arange(len(md.src)))
-    # barycentric coordinates of points on their source triangle
-    assert md.bary.min() >= 0 and np.allclose(md.bary.sum(1), 1)
 
 
 def test_face_estimate_is_the_face_count():
