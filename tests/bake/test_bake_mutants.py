@@ -74,3 +74,75 @@ def test_uv_warning_is_the_whole_sentence(variant):
     assert re.fullmatch(rf"low-poly UVs: {n_deg} degenerate triangles, {n_over} texels covered by "
                         r"overlapping triangles \(texture mapping not unambiguous, §3\.1\)",
                         str(w[0].message))
+
+
+def _png_chunks(path):
+    """The chunk types of a PNG file, read from its bytes."""
+    data, pos, kinds = open(path, "rb").read(), 8, []
+    while pos < len(data):
+        n = int.from_bytes(data[pos:pos + 4], "big")
+        kinds.append(data[pos + 4:pos + 8].decode())
+        pos += 12 + n
+    return kinds
+
+
+def test_unit_vectors_encode_as_documented_and_pngs_are_linear(tmp_path, variant):
+    # formats docstring: components x in [-1, 1] stored as round((x + 1) / 2 * 255), PNGs
+    # are linear data (no sRGB / gamma chunk claiming a curve)
+    from mi_displace.bake import formats
+
+    x = np.float32([-1.0, -0.5, 0.0, 0.5, 1.0])
+    n = np.zeros((1, 5, 3), np.float32)
+    n[0, :, 0] = x
+    n[0, :, 2] = np.sqrt(1 - x ** 2)
+    path = formats.write_map(tmp_path, "normal_object", {"displacement": np.zeros((1, 5), np.float32),
+                             "normal_tangent": n, "direction_tangent": n, "normal_object": n}, {})
+    q = formats.read_png_raw(path)[0, :, 0]
+    assert q.tolist() == np.floor((x.astype(np.float64) + 1) / 2 * 255 + 0.5).astype(int).tolist()
+    assert q[0] == 0 and q[-1] == 255
+    for fmt in ("d8", "d16", "normal_object"):
+        chunks = _png_chunks(formats.write_map(tmp_path, fmt, {
+            "displacement": np.zeros((1, 5), np.float32), "normal_tangent": n,
+            "direction_tangent": n, "normal_object": n}, {}))
+        assert chunks[0] == "IHDR" and chunks[-1] == "IEND"
+        assert not {"sRGB", "gAMA", "iCCP"} & set(chunks), (fmt, chunks)
+
+
+def test_missing_map_message_names_the_file(tmp_path):
+    from mi_displace.bake import formats
+
+    missing = tmp_path / "none.png"
+    with pytest.raises(FileNotFoundError) as e:
+        formats.read_map(missing)
+    assert str(e.value) == f"map file {str(missing)!r} does not exist"
+
+
+def test_restored_mesh_saves_as_obj_and_ply(tmp_path, variant):
+    import trimesh
+
+    from mi_displace.bake.meshdata import load_mesh
+    from mi_displace.bake.restore import restore
+
+    out = restore(plane(n=2), {"displacement": np.full((8, 8), 0.03, np.float32)}, levels=1)
+    assert np.allclose(out.positions[:, 2], 0.03, atol=1e-6)
+    out.save(tmp_path / "r.obj")
+    back = load_mesh(tmp_path / "r.obj", "restored")
+    assert len(back.faces) == len(out.faces) == 8 * 4
+    assert np.allclose(np.sort(back.positions[:, 2]), 0.03, atol=1e-6)
+    assert np.allclose(back.uvs[back.faces], out.uvs[out.faces], atol=1e-6)
+    out.save(tmp_path / "r.PLY")
+    ply = trimesh.load(tmp_path / "r.PLY", process=False)
+    assert np.allclose(ply.vertices, out.positions, atol=1e-6)
+    with pytest.raises(ValueError, match=r"^out: restored mesh must be \.ply or \.obj, got '.*r\.stl'$"):
+        out.save(tmp_path / "r.stl")
+
+
+def test_dropped_holes_are_reported(variant):
+    from mi_displace.bake.restore import restore
+
+    valid = np.ones((32, 32), np.float32)
+    valid[8:24, 8:24] = 0
+    out = restore(plane(n=4), {"displacement": np.zeros((32, 32), np.float32), "valid": valid}, levels=2)
+    assert out.report["holes"] == "dropped: faces with 2 or 3 void vertices (open low-poly)"
+    assert out.report["dropped_faces"] == 16 * 32 - len(out.faces) and out.report["dropped_faces"] > 0
+    assert not out.report["closed"]
