@@ -1,2 +1,78 @@
 """Tests written for mutants of volume/ that survived the suite (issue 19; docs/testing.md,
 "Bake, volume and slicing modules").  Each asserts numbers against an independent truth."""
+import re
+
+import numpy as np
+import pytest
+from volume_helpers import points as _p, to_numpy as _np
+
+#: parameters of each primitive that put every feature well inside the sampled box
+CASES = [("gaussian", {"amount": 0.4, "sigma": 0.2}),
+         ("peel", {"angle": 50.0, "hinge": 0.8, "height": 0.4, "radius": 0.5}),
+         ("slabs", {"count": 3.0, "gap": 0.2}),
+         ("wave", {"amount": 0.1, "frequency": 1.5, "phase": 0.2}),
+         ("seam", {"amount": 0.3})]
+
+
+@pytest.mark.parametrize("kind,params", CASES)
+def test_the_support_box_holds_every_displacement(variant, kind, params):
+    # maps.support: outside the box D = 0 and alpha = 1, or D is constant along the open
+    # axes (slabs do not depend on x, y, the wave not on z, the seam's opening stops
+    # growing above z = 1); a grid over a box twice as large checks both
+    from mi_displace.volume import maps
+
+    q = maps.check_params(kind, params)
+    lo, hi = maps.support(kind, q)
+    g = [np.linspace(a - 0.6 * (b - a), b + 0.6 * (b - a), 41) for a, b in zip(lo, hi)]
+    pts = np.stack(np.meshgrid(*g, indexing="ij"), -1).reshape(-1, 3)
+    d, alpha = maps.evaluate(kind, q, _p(pts))
+    d, alpha = _np(d), np.array(alpha)
+    open_axes = {"slabs": [0, 1], "wave": [2], "seam": [2]}.get(kind, [])
+    closed = [a for a in range(3) if a not in open_axes]
+    out = np.zeros(len(pts), bool)
+    for a in closed:
+        out |= (pts[:, a] < lo[a] - 1e-9) | (pts[:, a] > hi[a] + 1e-9)
+    assert out.sum() > 1000 and (~out).sum() > 1000
+    assert np.abs(d[out]).max() == 0 and alpha[out].min() == 1
+    assert np.abs(d[~out]).max() > 0.05            # the box is not empty of displacement
+    if open_axes:                                  # beyond the box along an open axis: D constant
+        pc = pts.copy()
+        pc[:, open_axes] = np.clip(pc[:, open_axes], lo[open_axes], hi[open_axes])
+        dc, ac = maps.evaluate(kind, q, _p(pc))
+        np.testing.assert_allclose(d, _np(dc), atol=1e-6)
+        assert np.array_equal(alpha, np.array(ac))
+    # and the box is tight: the last quarter of its last closed axis holds displacement
+    a = closed[-1]
+    top = ~out & (pts[:, a] > hi[a] - 0.25 * (hi[a] - lo[a]))
+    assert np.abs(d[top]).max() > 0
+
+
+def test_peel_is_continuous_across_the_cut_plane_beyond_the_hinge(variant):
+    # §4.1: D is C0 wherever matter is kept; right of the hinge (x > hinge) the lid's
+    # rotation fades to 0 at the cut plane, where the matter below does not move
+    from mi_displace.volume import maps
+
+    q = maps.check_params("peel", {"angle": 60.0, "hinge": 0.5, "height": 0.5, "radius": 1.0})
+    x = np.linspace(0.55, 1.2, 27)
+    for eps in (1e-3, 1e-4):
+        up = np.stack([x, np.full_like(x, 0.5), np.full_like(x, 0.5 + eps)], 1)
+        down = up * [1, 1, 0] + [0, 0, 0.5 - eps]
+        du, au = maps.evaluate("peel", q, _p(up))
+        dd, ad = maps.evaluate("peel", q, _p(down))
+        assert np.abs(_np(dd)).max() == 0 and np.array(ad).min() == 1 and np.array(au).min() == 1
+        # |D| is bounded by the arc length r * beta, beta <= angle of the ramp at phi ~ pi
+        assert np.abs(_np(du)).max() < 10 * eps
+
+
+def test_placement_messages_name_the_parameter_whole(variant):
+    from mi_displace.volume.maps import Placement
+
+    with pytest.raises(ValueError) as e:
+        Placement(np.eye(3), what="maps[1].to_world")
+    assert str(e.value) == "maps[1].to_world: expected a 4x4 matrix, got shape (3, 3)"
+    m = np.eye(4)
+    m[3, 0] = 0.5
+    with pytest.raises(ValueError, match=re.escape("maps[1].to_world: M must be affine (last row 0 0 0 1)")):
+        Placement(m, what="maps[1].to_world")
+    assert np.allclose(Placement(np.diag([2.0, 3.0, 4.0, 1.0])).world_box([0, 0, 0], [1, 1, 1]),
+                       [[0, 0, 0], [2, 3, 4]])
