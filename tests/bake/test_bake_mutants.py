@@ -146,3 +146,41 @@ def test_dropped_holes_are_reported(variant):
     assert out.report["holes"] == "dropped: faces with 2 or 3 void vertices (open low-poly)"
     assert out.report["dropped_faces"] == 16 * 32 - len(out.faces) and out.report["dropped_faces"] > 0
     assert not out.report["closed"]
+
+
+def test_object_normals_of_a_sphere_are_radial(variant):
+    # a finer sphere of radius 1.02 over the unit sphere: the high-poly's smooth shading normal
+    # at each texel is the radial direction of the texel's UV point (analytic parametrisation)
+    import drjit as dr
+    import mitsuba as mi
+    from conftest import _sphere_mesh
+
+    from mi_displace.core import surfaces
+
+    high = _sphere_mesh(96, 48, 0.0)
+    high = MeshData(high.positions * np.float32(1.02), high.faces, None)
+    r = bake(high, _sphere_mesh(48, 24, 0.0), res=64, max_distance=0.1, pad=0)
+    rows, cols = np.nonzero(r.covered)
+    u, v = (cols + 0.5) / 64, 1 - (rows + 0.5) / 64       # formats.UV_CONVENTION
+    s = surfaces.make_base("sphere", radius=1.0).sample(mi.Float(u), mi.Float(v))
+    radial = np.stack([np.asarray(c) for c in dr.normalize(s.p)], 1)
+    n = r.maps["normal_object"][rows, cols]
+    cos = (n * radial).sum(1)
+    assert len(cos) > 0.9 * 64 * 64 and np.median(cos) > 0.9999 and cos.min() > 0.998
+    # the low-poly's chords lie inside the unit sphere by at most 1 - cos(pi / 24) (24 rings)
+    d = r.maps["displacement"][rows, cols]
+    assert d.min() > 0.02 - 1e-3 and d.max() < 0.02 + (1 - np.cos(np.pi / 24)) * 1.02
+
+
+def test_map_sidecars_name_the_low_poly_written_beside_them(variant, tmp_path):
+    from mi_displace.bake.formats import read_metadata
+    from mi_displace.bake.restore import low_for_map
+
+    bake(plane(z=0.02, n=4), plane(n=2), res=8, max_distance=0.05, out_dir=tmp_path,
+         map_formats=["d16", "float"])
+    for name in ("d16.png", "float.exr"):
+        assert low_for_map(tmp_path / name) == str(tmp_path / "low.obj")
+        meta = read_metadata(tmp_path / name)
+        assert meta["low_faces"] == 8 and meta["valid"] == "valid.png" and meta["aa"] == 1
+        assert meta["max_distance"] == 0.05 and meta["cage"] is None
+    assert (tmp_path / "low.obj").is_file()
