@@ -184,3 +184,46 @@ def test_map_sidecars_name_the_low_poly_written_beside_them(variant, tmp_path):
         assert meta["low_faces"] == 8 and meta["valid"] == "valid.png" and meta["aa"] == 1
         assert meta["max_distance"] == 0.05 and meta["cage"] is None
     assert (tmp_path / "low.obj").is_file()
+
+
+def _tilted(n=8, z0=0.02, slope=0.1):
+    """A plane z = z0 + slope * x (n x n quads) over [-0.1, 1.1]^2: the rays along the
+    low-poly's +z normal measure d = z0 + slope * x exactly (linear in the texel position)."""
+    p = plane(size=1.2, n=n)
+    pos = p.positions - np.float32([0.1, 0.1, 0.0])
+    pos[:, 2] = z0 + slope * pos[:, 0]
+    return MeshData(pos, p.faces, None)
+
+
+@pytest.mark.parametrize("aa", [1, 2, 3])
+def test_texel_value_is_the_mean_over_its_aa_grid(variant, aa):
+    # d is linear in x, so the mean over any symmetric aa x aa grid is its value at the
+    # texel centre u = (c + 0.5) / W (formats.UV_CONVENTION)
+    W = 8
+    r = bake(_tilted(), plane(n=2), res=W, aa=aa, max_distance=0.2, pad=0)
+    x = (np.arange(W) + 0.5) / W
+    assert np.allclose(r.maps["displacement"], 0.02 + 0.1 * x[None, :], atol=2e-6)
+
+
+def test_conservative_band_texels_take_a_chart_point_of_their_own_footprint(variant):
+    # the chart covers u, v in [0.02, 0.478] (not on texel edges): the texels around it whose
+    # centres miss but whose corners overlap it are added, valued at a point of the chart
+    # (the centre's barycentrics clamped onto a triangle its corners found) that lies within
+    # the texel's own footprint; inside, every texel is its centre's value
+    W, lo, span = 32, 0.02, 0.458
+    low = plane(n=2)
+    low = MeshData(low.positions, low.faces, (low.uvs * span + lo).astype(np.float32))
+    r = bake(_tilted(), low, res=W, max_distance=0.2, pad=0)
+    u = (np.arange(W) + 0.5) / W
+    inside = (u > lo) & (u < lo + span)
+    band = ~inside & (u + 0.5 / W > lo) & (u - 0.5 / W < lo + span)
+    assert band.sum() == 2 and r.record["counts"]["conservative_samples"] > 0
+    rows = np.nonzero(r.covered.any(1))[0]
+    assert len(rows) == (inside | band).sum() and r.covered[rows][:, inside | band].all()
+    assert r.covered.sum() == (inside | band).sum() ** 2
+    mid = rows[1:-1]                                    # rows whose centres are inside
+    x_of = lambda uu: (np.clip(uu, lo, lo + span) - lo) / span   # chart x of a UV u
+    d = r.maps["displacement"][mid]
+    assert np.allclose(d[:, inside], 0.02 + 0.1 * x_of(u[inside]), atol=2e-6)
+    x = (d[:, band] - 0.02) / 0.1
+    assert np.all(x >= x_of(u[band] - 0.5 / W) - 1e-5) and np.all(x <= x_of(u[band] + 0.5 / W) + 1e-5)
