@@ -227,3 +227,69 @@ def test_conservative_band_texels_take_a_chart_point_of_their_own_footprint(vari
     assert np.allclose(d[:, inside], 0.02 + 0.1 * x_of(u[inside]), atol=2e-6)
     x = (d[:, band] - 0.02) / 0.1
     assert np.all(x >= x_of(u[band] - 0.5 / W) - 1e-5) and np.all(x <= x_of(u[band] + 0.5 / W) + 1e-5)
+
+
+def test_a_low_poly_a_fifth_of_the_diagonal_away_is_refused(variant):
+    high = plane(z=0.02, n=4)
+    shift = np.float32(0.2 * high.diagonal)
+    far = plane(n=2)
+    far = MeshData(far.positions + np.float32([1.0, 0.0, 0.0]) * shift + np.float32([1, 0, 0]),
+                   far.faces, far.uvs)
+    with pytest.raises(ValueError, match=r"^low-poly does not sit near the high-poly: bounding boxes"):
+        bake(high, far, res=8, max_distance=0.05)
+    near = plane(n=2)       # a gap of 1 % of the diagonal is accepted
+    near = MeshData(near.positions + np.float32([1.0 + 0.01 * high.diagonal, 0, 0]), near.faces, near.uvs)
+    from mi_displace.bake.baker import prepare_inputs
+
+    prepare_inputs(high, near)
+
+
+def test_quantised_sidecars_record_their_bit_depth(tmp_path):
+    # the §1.2 table (formats docstring): displacement bits of each quantised format
+    from mi_displace.bake import formats
+
+    rng = np.random.default_rng(3)
+    n = np.dstack([np.zeros((4, 6, 2)), np.ones((4, 6, 1))]).astype(np.float32)
+    maps = {"displacement": rng.uniform(-1, 1, (4, 6)).astype(np.float32), "normal_tangent": n,
+            "normal_object": n, "direction_tangent": n,
+            "back_depth": rng.uniform(-1, 0, (4, 6)).astype(np.float32)}
+    table = {"d8": 8, "d16": 16, "dir24_d8": 8, "dir16_d16": 16, "d8_n24": 8, "dual_d8_n16": 8,
+             "d16_n16": 16, "float": 32}
+    for fmt, bits in table.items():
+        formats.write_map(tmp_path, fmt, maps, {})
+        assert formats.read_metadata(tmp_path / f"{fmt}{formats.FORMATS[fmt]}")["displacement"]["bits"] == bits
+
+
+def test_cage_tilted_along_the_bitangent_restores(variant, tmp_path):
+    # the direction's y (bitangent) component must be used as such: a cage shifted along +y
+    from mi_displace.bake.meshdata import save_obj
+    from mi_displace.bake.restore import restore
+
+    low = plane(n=2)
+    cage = MeshData(low.positions + np.float32([0.0, 0.05, 0.1]), low.faces, low.uvs)
+    save_obj(tmp_path / "cage.obj", cage.positions, cage.faces, cage.uvs)
+    bake(plane(z=0.02, n=4, size=1.2), low, res=16, cage=tmp_path / "cage.obj", max_distance=0.05,
+         pad=2, out_dir=tmp_path / "b", map_formats=["float"])
+    out = restore(tmp_path / "b" / "low.obj", tmp_path / "b" / "float.exr", levels=1)
+    moved = out.positions - np.c_[out.uvs, np.zeros(len(out.uvs))]
+    assert np.allclose(moved, [0.0, 0.01, 0.02], atol=1e-5)
+
+
+def test_void_texels_of_a_closed_low_poly_take_their_neighbours_displacement(variant):
+    # a closed sphere, displacement 0.04 everywhere it was measured; the void patch holds
+    # garbage (0.5) in the map: its vertices take the harmonic interpolation of the measured
+    # displacement vectors around them (0.04 radially, so a little shorter where the ring's
+    # directions fan out), and no face is dropped
+    from conftest import _sphere_mesh
+
+    from mi_displace.bake.restore import restore
+
+    low = _sphere_mesh(24, 12, 0.0)
+    disp = np.full((64, 64), 0.04, np.float32)
+    valid = np.ones((64, 64), np.float32)
+    disp[27:37, 27:37], valid[24:40, 24:40] = 0.5, 0.0   # garbage 3 texels inside the void
+    out = restore(low, {"displacement": disp, "valid": valid}, levels=1)
+    assert out.report["closed"] and out.report["void_vertices"] > 0 and out.report["dropped_faces"] == 0
+    assert len(out.faces) == 4 * len(low.faces)
+    radius = np.linalg.norm(out.positions, axis=1)
+    assert np.abs(radius - 1.04).max() < 0.03              # the garbage would give 1.5
