@@ -76,3 +76,20 @@ def test_placement_messages_name_the_parameter_whole(variant):
         Placement(m, what="maps[1].to_world")
     assert np.allclose(Placement(np.diag([2.0, 3.0, 4.0, 1.0])).world_box([0, 0, 0], [1, 1, 1]),
                        [[0, 0, 0], [2, 3, 4]])
+
+
+@pytest.mark.parametrize("kind,channels", [("gaussian", 4), ("wave", 3)])
+def test_texture_bytes_count_the_non_zero_channels(variant, kind, channels):
+    # gaussian: D = (0, 0, D_z(x, y, z)), no cut: D_z plus the three entries of J's row z;
+    # wave: D_z(x, y) only, so J's row z has two entries; alpha = 1 and grad alpha = 0 are
+    # not stored.  16 bit: 2 bytes a channel; the full format stores all 16 channels
+    from mi_displace.volume.displacement import DisplacementChain, PlacedMap
+
+    m = PlacedMap(kind)
+    for bits in (8, 16):
+        s = m.sampled(bits, 1.5)
+        voxels = int(np.prod(m.resolution))
+        assert s.voxels == voxels
+        assert s.nbytes() == voxels * channels * bits // 8
+        assert s.nbytes(all_channels=True) == voxels * 16 * bits // 8
+        assert DisplacementChain([m, PlacedMap(kind)], bits=bits).nbytes() == 2 * s.nbytes()
