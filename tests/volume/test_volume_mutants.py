@@ -93,3 +93,52 @@ def test_texture_bytes_count_the_non_zero_channels(variant, kind, channels):
         assert s.nbytes() == voxels * channels * bits // 8
         assert s.nbytes(all_channels=True) == voxels * 16 * bits // 8
         assert DisplacementChain([m, PlacedMap(kind)], bits=bits).nbytes() == 2 * s.nbytes()
+
+
+def _rotation(ax, ay, az):
+    cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def test_jacobian_of_an_obliquely_placed_map_matches_finite_differences(variant):
+    # placed by a rotation about all three axes (and a non-uniform scale), the world D of the
+    # wave has three non-zero components, so all nine entries of J are distinct
+    from mi_displace.volume.displacement import PlacedMap
+
+    m4 = np.eye(4)
+    m4[:3, :3] = _rotation(0.5, -0.7, 0.9) @ np.diag([1.2, 0.8, 1.0])
+    m4[:3, 3] = [0.1, -0.2, 0.3]
+    m = PlacedMap("wave", {"amount": 0.08, "frequency": 1.0}, to_world=m4, resolution=(96, 16, 8))
+    s = m.sampled(32, 0.0)
+    l = np.random.default_rng(11).uniform(0.25, 0.75, (400, 3))
+    pw = l @ m4[:3, :3].T + m4[:3, 3]
+    _, _, jac, _ = s.lookup(_p(pw), True)
+    J = np.stack([np.broadcast_to(np.array(jac[j][i]), 400) for i in range(3) for j in range(3)],
+                 -1).reshape(-1, 3, 3)
+    h = 1e-3
+    fd = np.zeros_like(J)
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = h
+        fd[:, :, k] = (_np(m.exact(_p(pw + e))[0]) - _np(m.exact(_p(pw - e))[0])) / (2 * h)
+    assert (np.abs(fd).max(0) > 1e-3).all()          # all nine entries are live
+    assert np.abs(J - fd).max() < 0.05 * np.abs(fd).max()
+
+
+def test_peel_skips_its_undisplaced_cells(variant):
+    # the peel (three stored channels: D_x, D_z, 1 - alpha) turns nothing farther than
+    # 1.2 radius from its hinge: the corners of its support box are flagged all-zero and
+    # skipped, and reading there gives D = 0, alpha = 1, J = 0
+    from mi_displace.volume.displacement import PlacedMap
+
+    m = PlacedMap("peel", {"angle": 60.0, "hinge": 1.0, "height": 0.5, "radius": 0.6})
+    s = m.sampled(16, 1.5)
+    assert s.nonzero is not None and 0.05 < 1 - s.flags.mean() < 0.9
+    r = 1.2 * 0.6
+    far = _p([[1 - 0.97 * r, 0.5, 0.5 + 0.97 * r], [1 + 0.97 * r, 0.2, 0.5 + 0.97 * r]])
+    d, a, jac, ga = s.lookup(far, True)
+    assert np.abs(_np(d)).max() == 0 and np.array(a).min() == 1
+    assert max(np.abs(np.array(jac[i][j])).max() for i in range(3) for j in range(3)) == 0
