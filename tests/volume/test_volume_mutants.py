@@ -142,3 +142,63 @@ def test_peel_skips_its_undisplaced_cells(variant):
     d, a, jac, ga = s.lookup(far, True)
     assert np.abs(_np(d)).max() == 0 and np.array(a).min() == 1
     assert max(np.abs(np.array(jac[i][j])).max() for i in range(3) for j in range(3)) == 0
+
+
+def _ball_volume(maps=(), mode="approximation", **kw):
+    """The soft ball of test_volume_normals (density 1 for r < 0.15, ramp to 0 at r = 0.3)."""
+    from mi_displace.volume.displacement import DisplacementChain
+    from mi_displace.volume.field import DisplacedVolume
+    from mi_displace.volume.objects import ObjectVolume
+
+    n = 48
+    c = (np.arange(n) + 0.5) / n - 0.5
+    z, y, x = np.meshgrid(c, c, c, indexing="ij")
+    r = np.sqrt(x * x + y * y + z * z)
+    obj = ObjectVolume(np.clip((0.3 - r) / 0.15, 0, 1), [-0.5] * 3, [0.5] * 3, value_range=(0, 1))
+    v = DisplacedVolume(obj, DisplacementChain(list(maps), bits=32), mode=mode, **kw)
+    v.prepare()
+    return v
+
+
+def test_where_the_field_is_flat_every_normal_is_the_fallback(variant):
+    # inside the ball's core the density is constant (gradient 0): no direction is defined,
+    # and every method returns the caller's fallback, with its sign
+    import mitsuba as mi
+
+    v = _ball_volume(tf_low=0.0, tf_high=1.0)
+    core = _p(np.random.default_rng(2).uniform(-0.05, 0.05, (50, 3)))
+    for fallback in ([0.0, 0.0, 1.0], [0.6, -0.8, 0.0]):
+        for method in ("gradient", "jacobian", "blend"):
+            n = _np(v.normal(core, method, mi.Vector3f(fallback)))
+            assert np.allclose(n, fallback, atol=1e-6), (method, fallback)
+
+
+def test_majorant_is_the_tight_bound_of_sigma_t(variant):
+    # density_scale * tau(largest voxel), raised by only 1e-5 relative (field docstring)
+    v = _ball_volume(tf_low=0.2, tf_high=0.8, density_scale=7.0)
+    pts = _p(np.random.default_rng(4).uniform(-0.3, 0.3, (20000, 3)))
+    top = np.array(v.sigma_t(pts)).max()
+    assert top == pytest.approx(7.0, rel=1e-5)          # the core reaches tau = 1
+    assert top <= v.majorant() <= 7.0 * (1 + 2e-5)
+    assert v.nbytes() == {"object": v.obj.nbytes(), "maps": 0}
+
+
+def test_a_lookup_without_the_alpha_gradient_is_not_reused_for_blend(variant):
+    # normal(lookup=...) reuses a caller's lookup only if it holds what the method needs:
+    # blend needs grad alpha, so a lookup made without it is redone (same normals as none)
+    import mitsuba as mi
+
+    from mi_displace.volume.displacement import PlacedMap
+
+    v = _ball_volume([PlacedMap("slabs", {"count": 2, "gap": 0.15},
+                                to_world=np.diag([1.0, 1.0, 0.6, 1.0]) + np.c_[np.zeros((4, 3)), [-.5, -.5, -.3, 0]])],
+                     tf_low=0.0, tf_high=1.0)
+    p = _p(np.random.default_rng(6).uniform(-0.3, 0.3, (2000, 3)))
+    fb = mi.Vector3f(0, 0, 1)
+    plain = v.lookup(p, normals=True, alpha_gradient=False)
+    assert plain.B is not None and plain.galpha is None
+    for method in ("jacobian", "blend"):
+        np.testing.assert_allclose(_np(v.normal(p, method, fb, lookup=plain)), _np(v.normal(p, method, fb)),
+                                   atol=1e-6)
+    full = v.lookup(p, normals=True)
+    np.testing.assert_allclose(_np(v.normal(p, "blend", fb, lookup=full)), _np(v.normal(p, "blend", fb)), atol=1e-6)
