@@ -341,3 +341,27 @@ def test_only_edges_inside_the_view_cone_count(variant_llvm):
         m[:3, 3] = [0.45 + lateral, 0.45, 2.5]
         why = auto_levels(small, (64, 64), [cam], m)[1]
         assert (why["levels_screen"] is not None) == seen, lateral
+
+
+def test_an_isolated_sliver_chart_gets_no_texels_and_is_counted(variant):
+    # uv_raster docstring: only uncovered texels next to a covered one try their corners, so a
+    # UV island thinner than a texel and far from every covered texel gets none, and is
+    # reported in triangles_without_texels (the main chart gets all its texels)
+    low = plane(n=2)
+    pos = np.concatenate([low.positions, low.positions[low.faces[0]]])
+    uvs = np.concatenate([low.uvs * np.float32(0.5),
+                          np.float32([[0.80, 0.70], [0.80 + 0.3 / 16, 0.70], [0.80, 0.90]])])
+    faces = low.faces.copy()
+    faces[0] = [9, 10, 11]
+    r = bake(plane(z=0.02, n=4), MeshData(pos, faces, uvs.astype(np.float32)), res=16,
+             max_distance=0.05, pad=0)
+    assert r.record["counts"]["triangles_without_texels"] == 1
+    assert not r.covered[:, 11:].any() and r.covered[8:, :8].sum() > 0.6 * 64   # face 0 moved
+
+
+def test_overlap_is_measured_at_most_at_256(variant):
+    # "it costs 2 x 256^2 rays at most" (overlap_texels): the record says at what resolution
+    r = bake(plane(z=0.02, n=2), plane(n=1), res=300, max_distance=0.05, pad=0)
+    assert r.record["counts"]["uv_overlap_resolution"] == 256
+    r = bake(plane(z=0.02, n=2), plane(n=1), res=(40, 20), max_distance=0.05, pad=0)
+    assert r.record["counts"]["uv_overlap_resolution"] == 40
