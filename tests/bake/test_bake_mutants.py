@@ -365,3 +365,38 @@ def test_overlap_is_measured_at_most_at_256(variant):
     assert r.record["counts"]["uv_overlap_resolution"] == 256
     r = bake(plane(z=0.02, n=2), plane(n=1), res=(40, 20), max_distance=0.05, pad=0)
     assert r.record["counts"]["uv_overlap_resolution"] == 40
+
+
+@pytest.mark.parametrize("mirror", [False, True])
+def test_decode_tangent_map_gives_the_object_normals(variant, mirror):
+    # a tilted high-poly z = 0.02 + 0.1 x: its normal is (-0.1, 0, 1) / |.|; decoding the
+    # tangent-space map in MikkTSpace's frame (mikktspace.decode_tangent_map) gives it back,
+    # also with the UVs mirrored in u (bitangent sign -1)
+    from mi_displace.bake.mikktspace import decode_tangent_map
+
+    low = plane(n=2)
+    if mirror:
+        low.uvs[:, 0] = 1 - low.uvs[:, 0]
+    r = bake(_tilted(), low, res=16, max_distance=0.2, pad=0)
+    out, inside = decode_tangent_map(r.low, r.maps["normal_tangent"])
+    truth = np.float32([-0.1, 0, 1]) / np.linalg.norm([-0.1, 0, 1])
+    assert inside.sum() == 256
+    assert np.allclose(out[inside], truth, atol=1e-4)
+    assert np.allclose(r.maps["normal_object"][inside], truth, atol=1e-4)
+
+
+def test_degenerate_triangles_copy_the_tangent_of_their_vertex(variant):
+    # MikkTSpace's DegenEpilogue: a triangle with two corners at one position takes, per
+    # corner, the tangent of a good corner of the same (welded) vertex.  UVs (y, x): the
+    # tangent dP/du is +y everywhere, not the default (1, 0, 0)
+    from mi_displace.bake.meshdata import vertex_normals
+    from mi_displace.bake.mikktspace import mikktspace
+
+    low = plane(n=2)
+    uvs = low.uvs[:, ::-1].copy()
+    for bad in ([4, 5, 4], [4, 4, 5], [5, 4, 4]):
+        faces = np.concatenate([low.faces, [bad]])
+        t, s = mikktspace(low.positions, faces, vertex_normals(low.positions, low.faces), uvs)
+        assert np.allclose(t[:-1], [0, 1, 0], atol=1e-6)
+        assert np.allclose(t[-1], [0, 1, 0], atol=1e-6), bad
+        assert np.all(s[-1] == s[0, 0])
