@@ -22,3 +22,45 @@ def test_a_plane_base_is_boxed_by_twelve_wall_triangles(variant, n):
     walls = geo.volume_walls(bm, 0.2)
     z = walls.positions[:, 2]
     assert z.min() < 0 < 0.2 < z.max() < 0.2 * 1.01     # -eps below, 1 + eps above (h x scale)
+
+
+def _sphere_images():
+    from mi_displace.slicing import depth_object as dobj
+
+    sphere = {"type": "sphere", "radius": 0.6, "center": [0.1, -0.05, 0.02]}
+    return dobj.capture(sphere, 32, center=[0, 0, 0], half=1.0)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_skip_leaves_an_empty_cell_a_hair_before_its_far_face(variant, sign):
+    # DepthObject.skip: from a point in an empty grid cell (the cube's corner, far from the
+    # sphere), skip(t) is where the ray leaves that cell, a hair short of it
+    import mitsuba as mi
+
+    from mi_displace.slicing import depth_object as dobj
+
+    obj = dobj.DepthObject(_sphere_images(), 40)
+    size = 2.0 / dobj.GRID
+    o = np.float32([-0.97, -0.97, -0.97]) * -sign          # inside corner cell (0, 0, 0) or the last
+    d = np.float32([1.0, 0.3, 0.2]) * sign
+    d /= np.linalg.norm(d)
+    cell = np.floor((o + 1) / size)
+    assert not np.array(obj.occupancy).reshape((dobj.GRID,) * 3)[tuple(cell.astype(int))]
+    skip = obj.skip(mi.Point3f(*map(float, o)), mi.Vector3f(*map(float, d)))
+    t = float(np.array(skip(mi.Float(0.0)))[0])
+    assert t > 0
+    assert np.array_equal(np.floor((o + t * d + 1) / size), cell)                  # still inside
+    assert not np.array_equal(np.floor((o + (t + 2e-4 * size) * d + 1) / size), cell)  # then out
+
+
+def test_images_of_different_sizes_are_named_in_the_message(variant, tmp_path):
+    from mi_displace.core.io import write_exr, write_png
+    from mi_displace.slicing import depth_object as dobj
+
+    path = dobj.write(_sphere_images(), tmp_path / "s")
+    write_exr(tmp_path / "s" / "depth_pz.exr", np.ones((16, 16, 3), np.float32))
+    write_png(tmp_path / "s" / "color_pz.png", np.zeros((16, 16, 3), np.float32))
+    with pytest.raises(ValueError) as e:
+        dobj.read(path)
+    sizes = ", ".join(f"{n}: {16 if n == 'pz' else 32}x{16 if n == 'pz' else 32}" for n in dobj.FACE_NAMES)
+    assert str(e.value) == f"depth object: the six images of {str(path)!r} differ in size ({sizes})"
