@@ -400,3 +400,74 @@ def test_degenerate_triangles_copy_the_tangent_of_their_vertex(variant):
         assert np.allclose(t[:-1], [0, 1, 0], atol=1e-6)
         assert np.allclose(t[-1], [0, 1, 0], atol=1e-6), bad
         assert np.all(s[-1] == s[0, 0])
+
+
+def test_memory_refusal_message_whole(variant, monkeypatch):
+    need = baker.memory_estimate(512, 512, 2)
+    monkeypatch.setenv("MI_DISPLACE_BAKE_MEMORY", str(need))
+    with pytest.raises(ValueError) as e:
+        bake(plane(z=0.02), plane(), res=512, aa=2)
+    assert str(e.value) == (f"res: a 512x512 bake with aa 2 needs about {need / 2**30:.1f} GiB but only "
+                            f"{need / 2**30:.1f} GiB is available; lower 'res' or 'aa'")
+
+
+def test_a_low_poly_eleven_times_larger_is_refused(variant):
+    high = plane(z=0.02, n=4)
+    big = plane(size=10.5, n=2)          # overlaps the high-poly, but 10.5x its diagonal
+    with pytest.raises(ValueError, match="^low-poly does not sit near the high-poly: bounding boxes"):
+        bake(high, big, res=8, max_distance=0.05)
+
+
+def test_padded_texels_are_counted(variant):
+    # a chart of 4 x 4 texels in an 8 x 8 map, padded by 2 texels: the 6 x 6 block around it
+    low = plane(n=2)
+    low = MeshData(low.positions, low.faces, (low.uvs * np.float32(0.5)).astype(np.float32))
+    r = bake(plane(z=0.02, n=4), low, res=8, max_distance=0.05, pad=2)
+    c = r.record["counts"]
+    assert c["covered"] == 16 and c["padded"] == int(r.maps["filled"].sum()) - 16 == 36 - 16
+
+
+def test_restore_refuses_a_boolean_or_fractional_split(variant):
+    from mi_displace.bake.restore import edge_splits
+
+    for bad in (True, 2.5, 65):
+        with pytest.raises(ValueError, match=r"^split: must be an integer in \[1, 64\]"):
+            edge_splits(None, bad)
+    for bad in (False, 1.5, 7):
+        with pytest.raises(ValueError, match=r"^levels: must be an integer in \[0, 6\]"):
+            edge_splits(bad, None)
+    assert edge_splits(None, 3) == 3 and edge_splits(3, None) == 8 and edge_splits(None, None) == 4
+
+
+def test_restore_of_another_low_poly_message_whole(variant, tmp_path):
+    from mi_displace.bake.restore import restore
+
+    bake(plane(z=0.02, n=4), plane(n=2), res=8, max_distance=0.05, out_dir=tmp_path, map_formats=["d16"])
+    with pytest.raises(ValueError) as e:
+        restore(plane(n=3), tmp_path / "d16.png")
+    assert str(e.value) == ("low: the map was baked over a low-poly with 8 faces, this one has 18; "
+                            "pass the low.obj the baker wrote beside the map")
+    out = restore(tmp_path / "low.obj", {"displacement": np.zeros((8, 8), np.float32)}, levels=0)
+    assert out.report["void_vertices"] == 0 and out.report["holes"] == "no validity mask"
+
+
+def test_a_constant_map_round_trips_in_every_format(tmp_path):
+    # hi == lo: the quantisation span falls back to 1 (no division by zero), every texel
+    # decodes to the constant
+    from mi_displace.bake import formats
+
+    n = np.dstack([np.zeros((4, 6, 2)), np.ones((4, 6, 1))]).astype(np.float32)
+    maps = {"displacement": np.full((4, 6), 0.25, np.float32), "normal_tangent": n,
+            "normal_object": n, "direction_tangent": n, "back_depth": np.full((4, 6), 0.25, np.float32)}
+    import warnings
+
+    for fmt in formats.FORMATS:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")            # no 0 / 0 on the way
+            path = formats.write_map(tmp_path, fmt, maps, {})
+        q = formats.read_metadata(path).get("displacement")
+        assert q is None or q["scale"] > 0, fmt       # a consumer may divide by it
+        out = formats.read_map(path)
+        if out["displacement"] is not None:
+            assert out["valid"] is None               # no mask named by this sidecar
+            assert np.allclose(out["displacement"], 0.25, atol=1e-7), fmt
