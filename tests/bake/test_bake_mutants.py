@@ -186,12 +186,12 @@ def test_map_sidecars_name_the_low_poly_written_beside_them(variant, tmp_path):
     assert (tmp_path / "low.obj").is_file()
 
 
-def _tilted(n=8, z0=0.02, slope=0.1):
-    """A plane z = z0 + slope * x (n x n quads) over [-0.1, 1.1]^2: the rays along the
-    low-poly's +z normal measure d = z0 + slope * x exactly (linear in the texel position)."""
+def _tilted(n=8, z0=0.02, slope=0.1, slope_y=0.0):
+    """A plane z = z0 + slope * x + slope_y * y (n x n quads) over [-0.1, 1.1]^2: the rays
+    along the low-poly's +z normal measure d = z0 + slope * x + slope_y * y exactly."""
     p = plane(size=1.2, n=n)
     pos = p.positions - np.float32([0.1, 0.1, 0.0])
-    pos[:, 2] = z0 + slope * pos[:, 0]
+    pos[:, 2] = z0 + slope * pos[:, 0] + slope_y * pos[:, 1]
     return MeshData(pos, p.faces, None)
 
 
@@ -369,17 +369,17 @@ def test_overlap_is_measured_at_most_at_256(variant):
 
 @pytest.mark.parametrize("mirror", [False, True])
 def test_decode_tangent_map_gives_the_object_normals(variant, mirror):
-    # a tilted high-poly z = 0.02 + 0.1 x: its normal is (-0.1, 0, 1) / |.|; decoding the
-    # tangent-space map in MikkTSpace's frame (mikktspace.decode_tangent_map) gives it back,
-    # also with the UVs mirrored in u (bitangent sign -1)
+    # a tilted high-poly z = 0.02 + 0.1 x + 0.05 y: its normal is (-0.1, -0.05, 1) / |.|;
+    # decoding the tangent-space map in MikkTSpace's frame (mikktspace.decode_tangent_map)
+    # gives it back, also with the UVs mirrored in u (bitangent sign -1)
     from mi_displace.bake.mikktspace import decode_tangent_map
 
     low = plane(n=2)
     if mirror:
         low.uvs[:, 0] = 1 - low.uvs[:, 0]
-    r = bake(_tilted(), low, res=16, max_distance=0.2, pad=0)
+    r = bake(_tilted(slope_y=0.05), low, res=16, max_distance=0.2, pad=0)
     out, inside = decode_tangent_map(r.low, r.maps["normal_tangent"])
-    truth = np.float32([-0.1, 0, 1]) / np.linalg.norm([-0.1, 0, 1])
+    truth = np.float32([-0.1, -0.05, 1]) / np.linalg.norm([-0.1, -0.05, 1])
     assert inside.sum() == 256
     assert np.allclose(out[inside], truth, atol=1e-4)
     assert np.allclose(r.maps["normal_object"][inside], truth, atol=1e-4)
@@ -471,3 +471,29 @@ def test_a_constant_map_round_trips_in_every_format(tmp_path):
         if out["displacement"] is not None:
             assert out["valid"] is None               # no mask named by this sidecar
             assert np.allclose(out["displacement"], 0.25, atol=1e-7), fmt
+
+
+def test_overlap_count_is_the_texel_centres_inside_both_triangles(variant):
+    # a two-triangle low-poly whose second triangle's UVs are moved onto the first one: the
+    # overlap reaches below the map's bottom row; overlap_texels counts the grid centres
+    # strictly inside both (margin 1e-4 in barycentrics), as a NumPy point-in-triangle test does
+    from mi_displace.bake.uv_raster import UVLayout, overlap_texels
+
+    pos = np.float32([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 0, 0], [1, 1, 0], [0, 1, 0]])
+    uvs = np.float32([[0.05, -0.2], [0.9, -0.1], [0.3, 0.85], [0.2, -0.3], [0.8, 0.7], [0.1, 0.6]])
+    low = MeshData(pos, np.array([[0, 1, 2], [3, 4, 5]]), uvs)
+    res = 64
+    c = (np.arange(res) + 0.5) / res
+    u, v = np.meshgrid(c, 1 - c, indexing="xy")
+    pts = np.stack([u.ravel(), v.ravel()], 1)
+
+    def inside(tri):
+        a, b, cc = uvs[tri]
+        m = np.linalg.inv(np.stack([b - a, cc - a], 1))
+        w = (pts - a) @ m.T
+        return np.minimum(np.minimum(w[:, 0], w[:, 1]), 1 - w.sum(1)) > 1e-4
+
+    both = inside([0, 1, 2]) & inside([3, 4, 5])
+    expected = int(both.sum())
+    assert expected > 100 and both.reshape(res, res)[-1].any()   # the bottom row too
+    assert overlap_texels(UVLayout(low), res) == expected
