@@ -202,3 +202,87 @@ def test_a_lookup_without_the_alpha_gradient_is_not_reused_for_blend(variant):
                                    atol=1e-6)
     full = v.lookup(p, normals=True)
     np.testing.assert_allclose(_np(v.normal(p, "blend", fb, lookup=full)), _np(v.normal(p, "blend", fb)), atol=1e-6)
+
+
+def test_parameter_edges_and_messages(variant):
+    from mi_displace.volume import maps
+    from mi_displace.volume.displacement import PlacedMap
+    from mi_displace.volume.field import AlbedoField
+
+    q = maps.check_params("gaussian", {"amount": 0.0})          # |amount| < 1 includes 0
+    d, a = maps.evaluate("gaussian", q, _p([[0.5, 0.5, 0.5]]))
+    assert np.abs(_np(d)).max() == 0
+    assert maps.check_params("wave", {"amount": 0.9})["amount"] == 0.9   # the seam's bound is the seam's
+    with pytest.raises(ValueError) as e:
+        PlacedMap("wave", resolution=(1, 8, 8))
+    assert str(e.value).startswith("wave resolution: ")
+    v = _ball_volume()
+    for bad in ([1.5, 0, 0], [-0.1, 0.5, 0.5], [np.nan, 0, 0]):
+        with pytest.raises(ValueError) as e:
+            AlbedoField(v, bad, [1, 1, 1])
+        assert str(e.value) == f"albedo_low: an RGB albedo needs three values in [0, 1], got {np.asarray(bad, float)}"
+    from mi_displace.volume.field import DisplacedVolume
+
+    with pytest.raises(ValueError) as e:
+        DisplacedVolume(v.obj, v.chain, tf_low=0.5, tf_high=0.5)
+    assert str(e.value) == "tf_low/tf_high: need finite tf_low < tf_high, got 0.5, 0.5"
+
+
+def test_world_box_of_an_uneven_box(variant):
+    from mi_displace.volume.maps import Placement
+
+    m = np.diag([2.0, 3.0, 4.0, 1.0])
+    m[:3, 3] = [1, 0, -1]
+    lo, hi = Placement(m).world_box([0, 1, 2], [1, 3, 5])
+    assert np.allclose(lo, [1, 3, 7]) and np.allclose(hi, [3, 9, 19])
+
+
+def test_alpha_gradient_texture_matches_finite_differences(variant):
+    # grad alpha_s (world units) read from the D_k equals central differences of the alpha_s
+    # the same lookup returns, on a slanted cut (the peel's wedge), placed by a scaled frame
+    from mi_displace.volume.displacement import PlacedMap
+
+    m4 = np.diag([1.3, 0.9, 1.1, 1.0])
+    m = PlacedMap("peel", {"angle": 40.0, "hinge": 0.8, "height": 0.4, "radius": 0.6}, to_world=m4,
+                  resolution=(48, 8, 48))
+    s = m.sampled(32, 1.5)
+    rng = np.random.default_rng(8)
+    l = np.c_[rng.uniform(0.35, 0.75, 600), rng.uniform(0.3, 0.7, 600), rng.uniform(0.45, 0.75, 600)]
+    pw = l @ m4[:3, :3].T
+    _, alpha, _, ga = s.lookup(_p(pw), True)
+    a0 = np.array(alpha)
+    keep = (a0 > 0.05) & (a0 < 0.95)
+    assert keep.sum() > 50
+    h = 2e-3
+    fd = np.zeros((len(pw), 3))
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = h
+        fd[:, k] = (np.array(s.lookup(_p(pw + e), False)[1]) - np.array(s.lookup(_p(pw - e), False)[1])) / (2 * h)
+    g = _np(ga)
+    err = np.linalg.norm(g[keep] - fd[keep], axis=1)
+    assert np.median(err) < 0.1 * np.median(np.linalg.norm(fd[keep], axis=1))
+
+
+def test_jacobian_along_every_local_axis_of_the_seam(variant):
+    # the seam's D_x depends on x, y and z (w = amount z sin(pi y)); on a grid of different
+    # spacings per axis, each column of J (the derivative along each axis) matches central
+    # differences of the exact D away from the gap
+    from mi_displace.volume.displacement import PlacedMap
+
+    m = PlacedMap("seam", {"amount": 0.15}, resolution=(40, 24, 16))
+    s = m.sampled(32, 0.0)
+    rng = np.random.default_rng(12)
+    pw = np.c_[rng.uniform(0.72, 0.85, 400), rng.uniform(0.25, 0.75, 400), rng.uniform(0.25, 0.75, 400)]
+    _, _, jac, _ = s.lookup(_p(pw), True)
+    J = np.stack([np.broadcast_to(np.array(jac[j][i]), 400) for i in range(3) for j in range(3)],
+                 -1).reshape(-1, 3, 3)
+    h = 1e-3
+    fd = np.zeros_like(J)
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = h
+        fd[:, :, k] = (_np(m.exact(_p(pw + e))[0]) - _np(m.exact(_p(pw - e))[0])) / (2 * h)
+    assert (np.abs(fd[:, 0, :]).max(0) > 0.02).all()           # dD_x/dx, /dy, /dz all live
+    for k in range(3):
+        assert np.abs(J[:, 0, k] - fd[:, 0, k]).max() < 0.1 * np.abs(fd[:, 0, k]).max(), k
