@@ -497,3 +497,16 @@ def test_overlap_count_is_the_texel_centres_inside_both_triangles(variant):
     expected = int(both.sum())
     assert expected > 100 and both.reshape(res, res)[-1].any()   # the bottom row too
     assert overlap_texels(UVLayout(low), res) == expected
+
+
+def test_texels_beyond_the_padding_hold_plus_z_normals(variant):
+    # the chart fills the left half of each row; texels beyond the padding are empty and
+    # hold displacement 0 and +z normals (baker._texel_average), never NaN
+    low = plane(n=2)
+    low = MeshData(low.positions, low.faces, (low.uvs * np.float32([0.5, 1.0])).astype(np.float32))
+    r = bake(plane(z=0.02, n=4), low, res=16, max_distance=0.05, pad=1)
+    empty = ~r.maps["filled"]
+    assert empty.sum() == 16 * 7
+    for name in ("normal_object", "normal_tangent", "direction_tangent"):
+        assert np.array_equal(r.maps[name][empty], np.tile(np.float32([0, 0, 1]), (int(empty.sum()), 1))), name
+    assert np.all(r.maps["displacement"][empty] == 0)
