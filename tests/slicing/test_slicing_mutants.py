@@ -64,3 +64,38 @@ def test_images_of_different_sizes_are_named_in_the_message(variant, tmp_path):
         dobj.read(path)
     sizes = ", ".join(f"{n}: {16 if n == 'pz' else 32}x{16 if n == 'pz' else 32}" for n in dobj.FACE_NAMES)
     assert str(e.value) == f"depth object: the six images of {str(path)!r} differ in size ({sizes})"
+
+
+def test_default_cube_holds_the_object_with_its_margin(variant, tmp_path):
+    # capture(): without center/half the cube is the bounding box, `margin` x larger: a
+    # sphere of radius 0.3 at c gets half = 0.306 and its nearest point lies 0.006 deep
+    from mi_displace.slicing import depth_object as dobj
+
+    c = np.array([0.2, -0.1, 0.4])
+    img = dobj.capture({"type": "sphere", "radius": 0.3, "center": c.tolist()}, 48)
+    assert np.allclose(img.center, c, atol=1e-5) and img.half == pytest.approx(0.306, rel=1e-4)
+    hit = np.isfinite(img.depth)
+    assert img.depth[hit].min() == pytest.approx(0.006, abs=2e-3) and img.depth[hit].min() > 0
+    # alpha: 1 at the nearest point, 0 where nothing was hit (whatever the cube size)
+    a = img.alpha()
+    assert a[~hit].max() == 0 and a[hit].max() == pytest.approx(1 - 0.006 / 0.612, abs=3e-3)
+    meta = __import__("json").loads(dobj.write(img, tmp_path / "s").read_text())
+    assert meta["resolution"] == 48 and meta["half_size"] == img.half
+
+
+def test_without_normal_images_the_best_facing_cube_face_is_the_normal(variant):
+    import mitsuba as mi
+
+    from mi_displace.slicing import depth_object as dobj
+
+    img = _sphere_images()
+    img = dobj.DepthImages(img.center, img.half, img.depth, img.color, None)
+    obj = dobj.DepthObject(img, 20)
+    d = np.float32([[0.2, 0.3, -0.9], [0.9, 0.3, 0.2], [0.3, -0.9, 0.2], [0.5, 0.2, 0.9], [-0.2, 0.6, 0.5]])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    n = obj.normal(mi.Point3f(0.0, 0.0, 0.0), mi.Vector3f(*(mi.Float(d[:, k]) for k in range(3))))
+    got = np.stack([np.array(c) for c in n], 1)
+    k = np.abs(d).argmax(1)
+    want = np.zeros_like(d)
+    want[np.arange(len(d)), k] = -np.sign(d[np.arange(len(d)), k])
+    assert np.array_equal(got, want)
