@@ -79,6 +79,8 @@ def test_default_cube_holds_the_object_with_its_margin(variant, tmp_path):
     # alpha: 1 at the nearest point, 0 where nothing was hit (whatever the cube size)
     a = img.alpha()
     assert a[~hit].max() == 0 and a[hit].max() == pytest.approx(1 - 0.006 / 0.612, abs=3e-3)
+    big = dobj.capture({"type": "sphere", "radius": 0.3, "center": c.tolist()}, 16, center=c, half=2.0)
+    assert big.alpha()[~np.isfinite(big.depth)].max() == 0 and big.alpha().max() > 0.5
     meta = __import__("json").loads(dobj.write(img, tmp_path / "s").read_text())
     assert meta["resolution"] == 48 and meta["half_size"] == img.half
 
