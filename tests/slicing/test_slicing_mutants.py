@@ -101,3 +101,33 @@ def test_without_normal_images_the_best_facing_cube_face_is_the_normal(variant):
     want = np.zeros_like(d)
     want[np.arange(len(d)), k] = -np.sign(d[np.arange(len(d)), k])
     assert np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("name,params", [("plane", {}), ("sphere", {"radius": 0.8}),
+                                         ("cylinder", {"radius": 0.5, "length": 1.5}),
+                                         ("torus", {"major_radius": 1.0, "minor_radius": 0.3})])
+def test_base_coordinates_invert_the_parametrisation(variant, name, params):
+    # p = S(u, v) + h n(u, v): base_coordinates gives back (u, v, h), inside the domain;
+    # beyond a bounded domain's edge it says so
+    import drjit as dr
+    import mitsuba as mi
+
+    from mi_displace.core import surfaces
+    from mi_displace.slicing.geometry import base_coordinates
+
+    base = surfaces.make_base(name, **params)
+    rng = np.random.default_rng(3)
+    u, v = rng.uniform(0.05, 0.95, 500), rng.uniform(0.05, 0.95, 500)
+    h = rng.uniform(-0.1, 0.1, 500)
+    s = base.sample(mi.Float(u), mi.Float(v))
+    p = s.p + dr.normalize(s.n) * mi.Float(h)
+    bu, bv, bh, ok = base_coordinates(base, mi.Point3f(p))
+    assert np.array(ok).all()
+    for got, want in ((bu, u), (bv, v), (bh, h)):
+        np.testing.assert_allclose(np.array(got), want, atol=2e-5)
+    if name in ("plane", "cylinder"):
+        out = base.sample(mi.Float([0.5, 0.5]), mi.Float([1.4, -0.4])).p   # v beyond [0, 1]
+        assert not np.array(base_coordinates(base, mi.Point3f(out))[3]).any()
+    if name == "plane":
+        out = base.sample(mi.Float([1.3, -0.3]), mi.Float([0.5, 0.5])).p   # u beyond [0, 1]
+        assert not np.array(base_coordinates(base, mi.Point3f(out))[3]).any()
