@@ -131,3 +131,14 @@ def test_base_coordinates_invert_the_parametrisation(variant, name, params):
     if name == "plane":
         out = base.sample(mi.Float([1.3, -0.3]), mi.Float([0.5, 0.5])).p   # u beyond [0, 1]
         assert not np.array(base_coordinates(base, mi.Point3f(out))[3]).any()
+
+
+def test_base_tangents_are_dS_du_and_dS_dv(variant):
+    # the plane base S(u, v) = (2u - 1, 2v - 1, 0), placed by diag(2, 3, 1): dS/du = (4, 0, 0)
+    # and dS/dv = (0, 6, 0) at every vertex (the per-face values are exact on an affine map)
+    from mi_displace.slicing import geometry as geo
+
+    bm = geo.make_base_mesh("plane", {}, None, 4, np.diag([2.0, 3.0, 1.0, 1.0]))
+    assert len(bm.positions) > 9
+    assert np.allclose(bm.su, [4, 0, 0], atol=1e-9) and np.allclose(bm.sv, [0, 6, 0], atol=1e-9)
+    assert np.allclose(bm.normals, [0, 0, 1])
