@@ -6,19 +6,11 @@ import re
 import numpy as np
 import pytest
 from conftest import plane
+from test_bake_extremes import _stack
 
 from mi_displace.bake import baker
 from mi_displace.bake.baker import bake
 from mi_displace.bake.meshdata import MeshData
-
-
-def _stack(*meshes):
-    pos = np.concatenate([m.positions for m in meshes])
-    faces, off = [], 0
-    for m in meshes:
-        faces.append(m.faces + off)
-        off += len(m.positions)
-    return MeshData(pos, np.concatenate(faces))
 
 
 def test_cage_ray_flags_a_second_crossing_and_only_that(variant):

@@ -103,6 +103,22 @@ def _rotation(ax, ay, az):
     return rz @ ry @ rx
 
 
+def _texture_and_fd_jacobian(m, s, pw, h=1e-3):
+    """(N, 3, 3) J read from the D_k ``s`` of map ``m`` at world points pw (N, 3), and the
+    central differences (step h) of m's exact world D there."""
+    _, _, jac, _ = s.lookup(_p(pw), True)
+    n = len(pw)
+    # lookup gives J^T; an all-zero entry may be a one-lane literal
+    J = np.stack([np.broadcast_to(np.array(jac[j][i]), n) for i in range(3) for j in range(3)],
+                 -1).reshape(-1, 3, 3)
+    fd = np.zeros_like(J)
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = h
+        fd[:, :, k] = (_np(m.exact(_p(pw + e))[0]) - _np(m.exact(_p(pw - e))[0])) / (2 * h)
+    return J, fd
+
+
 def test_jacobian_of_an_obliquely_placed_map_matches_finite_differences(variant):
     # placed by a rotation about all three axes (and a non-uniform scale), the world D of the
     # wave has three non-zero components, so all nine entries of J are distinct
@@ -115,15 +131,7 @@ def test_jacobian_of_an_obliquely_placed_map_matches_finite_differences(variant)
     s = m.sampled(32, 0.0)
     l = np.random.default_rng(11).uniform(0.25, 0.75, (400, 3))
     pw = l @ m4[:3, :3].T + m4[:3, 3]
-    _, _, jac, _ = s.lookup(_p(pw), True)
-    J = np.stack([np.broadcast_to(np.array(jac[j][i]), 400) for i in range(3) for j in range(3)],
-                 -1).reshape(-1, 3, 3)
-    h = 1e-3
-    fd = np.zeros_like(J)
-    for k in range(3):
-        e = np.zeros(3)
-        e[k] = h
-        fd[:, :, k] = (_np(m.exact(_p(pw + e))[0]) - _np(m.exact(_p(pw - e))[0])) / (2 * h)
+    J, fd = _texture_and_fd_jacobian(m, s, pw)
     assert (np.abs(fd).max(0) > 1e-3).all()          # all nine entries are live
     assert np.abs(J - fd).max() < 0.05 * np.abs(fd).max()
 
@@ -274,15 +282,7 @@ def test_jacobian_along_every_local_axis_of_the_seam(variant):
     s = m.sampled(32, 0.0)
     rng = np.random.default_rng(12)
     pw = np.c_[rng.uniform(0.72, 0.85, 400), rng.uniform(0.25, 0.75, 400), rng.uniform(0.25, 0.75, 400)]
-    _, _, jac, _ = s.lookup(_p(pw), True)
-    J = np.stack([np.broadcast_to(np.array(jac[j][i]), 400) for i in range(3) for j in range(3)],
-                 -1).reshape(-1, 3, 3)
-    h = 1e-3
-    fd = np.zeros_like(J)
-    for k in range(3):
-        e = np.zeros(3)
-        e[k] = h
-        fd[:, :, k] = (_np(m.exact(_p(pw + e))[0]) - _np(m.exact(_p(pw - e))[0])) / (2 * h)
+    J, fd = _texture_and_fd_jacobian(m, s, pw)
     assert (np.abs(fd[:, 0, :]).max(0) > 0.02).all()           # dD_x/dx, /dy, /dz all live
     for k in range(3):
         assert np.abs(J[:, 0, k] - fd[:, 0, k]).max() < 0.1 * np.abs(fd[:, 0, k]).max(), k
