@@ -286,3 +286,56 @@ def test_jacobian_along_every_local_axis_of_the_seam(variant):
     assert (np.abs(fd[:, 0, :]).max(0) > 0.02).all()           # dD_x/dx, /dy, /dz all live
     for k in range(3):
         assert np.abs(J[:, 0, k] - fd[:, 0, k]).max() < 0.1 * np.abs(fd[:, 0, k]).max(), k
+
+
+def test_set_moves_the_map_and_the_proxy_holds_matter_moved_down(variant):
+    # PlacedMap.set(to_world=...) re-places the map (exact D follows the new M); a wave moves
+    # matter both up and down, so the proxy box grows on both sides of the object's box and
+    # holds every p' whose pre-image lies in the box
+    from mi_displace.volume.displacement import DisplacementChain, PlacedMap
+
+    m = PlacedMap("wave", {"amount": 0.2, "frequency": 1.0})
+    shift = np.eye(4)
+    shift[:3, 3] = [2.0, 0.0, 0.0]
+    m.set(to_world=shift)
+    l = np.random.default_rng(13).uniform(0.2, 0.8, (300, 3))
+    d_local, _ = PlacedMap("wave", {"amount": 0.2, "frequency": 1.0}).exact(_p(l))
+    d_moved, _ = m.exact(_p(l + [2.0, 0.0, 0.0]))
+    np.testing.assert_allclose(_np(d_moved), _np(d_local), atol=1e-6)
+    assert np.allclose(m.support_world()[0], [2, 0, 0])
+    chain = DisplacementChain([PlacedMap("wave", {"amount": 0.2, "frequency": 1.0})])
+    lo, hi = chain.proxy_box([0, 0, 0], [1, 1, 1])
+    assert lo[2] < -0.1 and hi[2] > 1.1
+    pp = np.random.default_rng(14).uniform(-0.5, 1.5, (20000, 3))
+    r = chain.exact(_p(pp))
+    pre = _np(r.p)
+    inside = ((pre >= 0) & (pre <= 1)).all(1)
+    assert ((pp[inside] >= lo - 1e-6) & (pp[inside] <= hi + 1e-6)).all()
+
+
+def test_blend_is_eq_7_between_the_jacobian_and_the_cut_normal(variant):
+    # eq. 7: n = normalize(w n_J - (1 - w) grad alpha_s / |grad alpha_s|), w = clip(2 alpha_s - 1)
+    # where 1/2 < alpha_s < 1 (near a cut face) both terms count
+    import mitsuba as mi
+
+    from mi_displace.volume.displacement import PlacedMap
+
+    m4 = np.diag([1.0, 1.0, 0.6, 1.0])
+    m4[:3, 3] = [-0.5, -0.5, -0.3]
+    v = _ball_volume([PlacedMap("slabs", {"count": 2, "gap": 0.15}, to_world=m4)], tf_low=0.0, tf_high=1.0)
+    rng = np.random.default_rng(15)
+    pts = np.c_[rng.uniform(-0.25, 0.25, (20000, 2)), rng.uniform(-0.04, 0.13, 20000)]
+    p = _p(pts)
+    fb = mi.Vector3f(0, 0, 1)
+    r = v.lookup(p, normals=True)
+    a, ga = np.array(r.alpha), _np(r.galpha)
+    n_j = _np(v.normal(p, "jacobian", fb))
+    n_b = _np(v.normal(p, "blend", fb))
+    w = np.clip(2 * a - 1, 0, 1)
+    g = np.linalg.norm(ga, axis=1)
+    field = np.array(v.smooth_field(p))
+    use = (w > 0.1) & (w < 0.9) & (g > 1e-2) & (field > 0.05)
+    assert use.sum() > 100
+    want = w[:, None] * n_j - (1 - w[:, None]) * ga / np.maximum(g, 1e-30)[:, None]
+    want /= np.linalg.norm(want, axis=1, keepdims=True)
+    assert np.abs(n_b[use] - want[use]).max() < 1e-4
