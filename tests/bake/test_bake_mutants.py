@@ -502,3 +502,15 @@ def test_texels_beyond_the_padding_hold_plus_z_normals(variant):
     for name in ("normal_object", "normal_tangent", "direction_tangent"):
         assert np.array_equal(r.maps[name][empty], np.tile(np.float32([0, 0, 1]), (int(empty.sum()), 1))), name
     assert np.all(r.maps["displacement"][empty] == 0)
+
+
+def test_footprint_of_a_thin_lens_is_the_pinhole_one(variant_llvm):
+    # pixel_footprint traces the rays through the lens centre: a thin-lens camera gives the
+    # eye, direction and angle of the pinhole camera with its field of view
+    from mi_displace.bake.levels import pixel_footprint
+
+    pin = pixel_footprint(_look("perspective", 3.0, 64, 64, fov=40.0))
+    lens = pixel_footprint(_look("thinlens", 3.0, 64, 64, fov=40.0, aperture_radius=0.3, focus_distance=3.0))
+    assert np.allclose(lens["origin"], [0.5, 0.5, 3.0], atol=1e-5)
+    assert np.allclose(lens["direction"], pin["direction"], atol=1e-6)
+    assert lens["angle"] == pytest.approx(pin["angle"], rel=1e-4)

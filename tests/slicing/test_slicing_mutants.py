@@ -142,3 +142,19 @@ def test_base_tangents_are_dS_du_and_dS_dv(variant):
     assert len(bm.positions) > 9
     assert np.allclose(bm.su, [4, 0, 0], atol=1e-9) and np.allclose(bm.sv, [0, 6, 0], atol=1e-9)
     assert np.allclose(bm.normals, [0, 0, 1])
+
+
+def test_projected_size_through_a_thin_lens_is_the_pinhole_one(variant):
+    # a thin-lens camera focused on the object projects a point like the pinhole at the lens
+    # centre: 0.1 world units at distance 3, 64 pixels over 40 degrees: 0.1 / (2 * 3 tan 20) * 64
+    import mitsuba as mi
+
+    from mi_displace.slicing.geometry import projected_size
+
+    to_world = mi.ScalarTransform4f().look_at(origin=[0, 0, 3], target=[0, 0, 0], up=[0, 1, 0])
+    film = {"type": "hdrfilm", "width": 64, "height": 64}
+    bbox = (np.array([-0.1, -0.1, -0.1]), np.array([0.1, 0.1, 0.1]))
+    want = 0.1 / (2 * 2.9 * np.tan(np.radians(20))) * 64          # the box's nearest point: z = 0.1
+    for extra in ({"type": "perspective"}, {"type": "thinlens", "aperture_radius": 0.2, "focus_distance": 2.9}):
+        cam = mi.load_dict({**extra, "fov": 40, "film": film, "to_world": to_world})
+        assert projected_size(cam, bbox, 0.1) == pytest.approx(want, rel=1e-3), extra["type"]
