@@ -58,6 +58,18 @@ declare -A SELECTION=(
   [mi_displace/vdm/lookup.py]="tests/vdm/test_vdm_lookup.py tests/vdm/test_vdm_unseen.py tests/vdm/test_vdm_plugin.py::test_silhouettes_and_relief_follow_true_displacement tests/vdm/test_vdm_plugin.py::test_grazing_views_and_deep_relief tests/vdm/test_vdm_plugin.py::test_curvature_beyond_range_is_clamped_and_counted tests/vdm/test_vdm_plugin.py::test_depth_zero_is_the_nested_material"
   [mi_displace/vdm/steps.py]="tests/vdm/test_vdm_steps.py tests/vdm/test_vdm_unseen.py tests/vdm/test_vdm_plugin.py::test_silhouettes_and_relief_follow_true_displacement tests/vdm/test_vdm_plugin.py::test_grazing_views_and_deep_relief tests/vdm/test_vdm_plugin.py::test_curvature_beyond_range_is_clamped_and_counted tests/vdm/test_vdm_plugin.py::test_depth_zero_is_the_nested_material"
   [mi_displace/core/dicing.py]="tests/core/test_dicing.py"
+  [mi_displace/bake/trace.py]="tests/bake/test_bake_extremes.py tests/bake/test_bake_naive.py tests/bake/test_bake_cage_multistep.py::test_cage_offset_measures_along_the_cage tests/bake/test_bake_cage_multistep.py::test_cage_rays_that_miss_are_classified tests/bake/test_bake_cage_multistep.py::test_tilted_cage_direction_round_trip tests/bake/test_bake_mikktspace.py tests/bake/test_bake_mutants.py"
+  [mi_displace/bake/baker.py]="tests/bake/test_bake_extremes.py tests/bake/test_bake_sphere.py tests/bake/test_bake_cli.py tests/bake/test_bake_padding_tangent.py tests/bake/test_bake_mutants.py"
+  [mi_displace/bake/restore.py]="tests/bake/test_bake_restore.py tests/bake/test_bake_seams_holes.py tests/bake/test_bake_plugin.py::test_restored_shape_matches_restore tests/bake/test_bake_mutants.py"
+  [mi_displace/bake/formats.py]="tests/bake/test_bake_formats.py tests/bake/test_bake_faults.py tests/bake/test_bake_sphere.py tests/bake/test_bake_mutants.py"
+  [mi_displace/bake/uv_raster.py]="tests/bake/test_bake_extremes.py tests/bake/test_bake_naive.py tests/bake/test_bake_sphere.py::test_map_matches_function tests/bake/test_bake_mutants.py"
+  [mi_displace/bake/mikktspace.py]="tests/bake/test_bake_mikktspace.py tests/bake/test_bake_padding_tangent.py tests/bake/test_bake_mutants.py"
+  [mi_displace/bake/levels.py]="tests/bake/test_bake_levels.py tests/bake/test_bake_mutants.py"
+  [mi_displace/volume/maps.py]="tests/volume/test_volume_maps.py tests/volume/test_volume_mutants.py"
+  [mi_displace/volume/displacement.py]="tests/volume/test_volume_maps.py tests/volume/test_volume_normals.py tests/volume/test_volume_mutants.py"
+  [mi_displace/volume/field.py]="tests/volume/test_volume_normals.py tests/volume/test_volume_albedo.py tests/volume/test_volume_render.py tests/volume/test_volume_mutants.py"
+  [mi_displace/slicing/geometry.py]="tests/slicing/test_slicing.py tests/slicing/test_slicing_mutants.py"
+  [mi_displace/slicing/depth_object.py]="tests/slicing/test_depth_object.py tests/slicing/test_slicing_mutants.py"
 )
 
 root=$PWD
