@@ -95,7 +95,10 @@ def shading_interaction(si: mi.SurfaceInteraction3f, uv: mi.Point2f, normal: mi.
     out = mi.SurfaceInteraction3f(si)
     wi_world = si.to_world(si.wi)
     s = tangent - dr.dot(tangent, normal) * normal
-    s = dr.select(dr.squared_norm(s) > 1e-20, dr.normalize(s), mi.Frame3f(normal).s)
+    # relative: a tangent along the normal leaves float32 rounding (~1e-7 |tangent|) here,
+    # whose direction is arbitrary (not orthogonal to the normal)
+    s = dr.select(dr.squared_norm(s) > 1e-10 * dr.squared_norm(tangent), dr.normalize(s),
+                  mi.Frame3f(normal).s)
     out.sh_frame = mi.Frame3f(s, dr.cross(normal, s), normal)
     out.uv = uv
     out.wi = out.to_local(wi_world)

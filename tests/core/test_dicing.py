@@ -264,3 +264,29 @@ def test_mesh_base_dices_finer_near_the_camera_and_stays_watertight(variant, tmp
     assert front < back / 1.5          # the camera side is diced finer
     n = np.asarray(mi.traverse(shape)["vertex_normals"])
     assert np.all(np.isfinite(n))
+
+
+# --- mutants that survived the tests above (scripts/mutation.sh, docs/testing.md) ---------
+
+@pytest.mark.parametrize("name", ["plane", "sphere", "torus"])
+def test_diced_vertices_are_all_used_and_inside_the_domain(variant, name):
+    """No vertex without a face (trimesh's merge hides those from the Euler number), every
+    uv in the unit square, and on the plane V - E + F = 1 (a disk) with V = all vertices."""
+    base = surfaces.make_base(name)
+    d = dicing.dice_parametric(base, (7, 5), random_edges(base, 7, 5, np.random.default_rng(4)), 1.0)
+    np.testing.assert_array_equal(np.unique(d.faces), np.arange(len(d.uv)))
+    assert d.uv.min() >= 0 and d.uv.max() <= 1
+    if name == "plane":
+        edges = np.unique(np.sort(d.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), 1), axis=0)
+        assert len(d.uv) - len(edges) + len(d.faces) == 1
+
+
+def test_diced_mesh_vertices_are_all_used():
+    ico = trimesh.creation.icosphere(1)
+    weld = np.arange(len(ico.vertices))
+    uniq, side = dicing.mesh_edges(ico.faces, weld)
+    seg = np.random.default_rng(5).integers(1, 9, len(uniq))
+    md = dicing.dice_mesh(ico.faces, weld, seg, side, 1.0)
+    np.testing.assert_array_equal(np.unique(md.faces), np.arange(len(md.src)))
+    # barycentric coordinates of points on their source triangle
+    assert md.bary.min() >= 0 and np.allclose(md.bary.sum(1), 1)

@@ -1,5 +1,6 @@
 """Zero-curvature VDM by ray casting (paper §3.1) against analytic and brute-force truth."""
 import math
+import re
 
 import numpy as np
 import pytest
@@ -95,3 +96,46 @@ def test_bad_heights_and_spec(variant):
         build.check_spec(build.VDMSpec(res=4, n_theta=1))
     with pytest.raises(ValueError, match="curvature range"):
         build.check_spec(build.VDMSpec(res=4, c_range=(1.0, -1.0)))
+
+
+# --- mutants that survived the tests above (scripts/mutation.sh, docs/testing.md) ---------
+
+class _LinearTexture:
+    """A height texture H(u, v) = a u + b v, evaluated exactly (duck-typed: only ``eval_1``)."""
+
+    def __init__(self, a, b):
+        self.a, self.b = a, b
+
+    def eval_1(self, si):
+        return self.a * si.uv.x + self.b * si.uv.y
+
+
+def test_sample_heights_divides_each_axis_by_its_own_tiling(variant):
+    res, tiling = 4, (2.0, 4.0)
+    h = table.sample_heights(_LinearTexture(0.5, 0.75), res, tiling)
+    centres = (np.arange(res) + 0.5) / res
+    expected = 0.5 * centres[None, :] / tiling[0] + 0.75 * centres[:, None] / tiling[1]
+    assert h.shape == (res, res) and h.dtype == np.float32
+    np.testing.assert_allclose(h, expected, rtol=1e-6)
+
+
+def test_periodicity_warning_on_a_four_texel_wide_tile():
+    # a ramp along x: its wrap-around jump is (n - 1) times the neighbour difference
+    ramp = np.tile(np.linspace(0.0, 1.0, 64), (4, 1))
+    message = table.periodicity_warning(ramp, "vdm", (1, 1))
+    assert message is not None and "edge jump 63.0x" in message
+    # below 4 texels the ratio says nothing (at most n - 1 < 4): no warning
+    assert table.periodicity_warning(ramp[:3], "vdm", (1, 1)) is None
+    assert table.periodicity_warning(np.tile(np.linspace(0.0, 1.0, 4), (64, 1)), "vdm", (1, 1)) is None
+
+
+def test_heights_just_outside_the_unit_interval_are_clipped_not_refused():
+    tol = table.HEIGHT_TOLERANCE
+    h = np.array([[-0.9 * tol, 0.5], [0.25, 1 + 0.9 * tol]], np.float32)
+    np.testing.assert_array_equal(table.check_heights(h), [[0.0, 0.5], [0.25, 1.0]])
+    for bad, shown in ((-2 * tol, "-0.002..1"), (1 + 2 * tol, "0..1.002")):
+        h = np.array([[0.0, 1.0], [0.5, bad]], np.float32)
+        message = (f"vdm: 'height' values must lie in [0, 1] (1 = the reference surface), got "
+                   f"{shown}; rescale the height map (or use 'depth')")
+        with pytest.raises(ValueError, match=f"^{re.escape(message)}$"):
+            table.check_heights(h)
