@@ -1,0 +1,3 @@
+"""Tests written to kill mutants of the core/ modules that survived the other tests
+(issue 19, docs/testing.md, "Remaining ddm/ and core/ modules")."""
+from __future__ import annotations
