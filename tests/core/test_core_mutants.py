@@ -1,3 +1,112 @@
 """Tests written to kill mutants of the core/ modules that survived the other tests
 (issue 19, docs/testing.md, "Remaining ddm/ and core/ modules")."""
 from __future__ import annotations
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mi_displace.core.bezier import teapot_body
+from mi_displace.core.surfaces import principal_curvatures
+
+
+def _np(v):
+    return np.stack([np.asarray(c) for c in v], 1)
+
+
+# --- core/bezier.py ------------------------------------------------------------------------
+
+def _body_points(rng, n=400):
+    """Random (u, v) inside the teapot body's patches, away from patch borders (C = 4 columns,
+    R = 3 rows: the derivatives jump across a border)."""
+    col, row = rng.integers(0, 4, n), rng.integers(0, 3, n)
+    return (col + rng.uniform(0.1, 0.9, n)) / 4, (row + rng.uniform(0.1, 0.9, n)) / 3
+
+
+def test_teapot_derivatives_along_v_match_finite_differences(variant):
+    """S_v and n_v (the tests above check only u) against central differences of S and n."""
+    body = teapot_body()
+    u, v = _body_points(np.random.default_rng(1))
+    u, v = mi.Float(u), mi.Float(v)
+    s, h = body.sample(u, v), 1e-3
+    hi, lo = body.sample(u, v + h), body.sample(u, v - h)
+    fd = (_np(hi.p) - _np(lo.p)) / (2 * h)
+    scale = np.abs(fd).max()
+    assert np.abs(fd - _np(s.dp_dv)).max() < 1e-3 * scale
+    fdn = (_np(hi.n) - _np(lo.n)) / (2 * h)
+    assert np.abs(fdn - _np(s.dn_dv)).max() < 2e-2 * max(np.abs(fdn).max(), 1.0)
+    # n is the unit normal of S_u x S_v, pointing away from the z axis on the body rows
+    cross = np.cross(_np(s.dp_du), _np(s.dp_dv))
+    cross /= np.linalg.norm(cross, axis=1, keepdims=True)
+    assert np.allclose(_np(s.n), cross, atol=1e-4) or np.allclose(_np(s.n), -cross, atol=1e-4)
+
+
+def test_teapot_extent_is_the_longest_isoparametric_curve(variant):
+    """extent() = (longest u-line, longest v-line) in object units, measured as polylines."""
+    body = teapot_body()
+    n, k = 96, 1024
+    t = (np.arange(n) + 0.5) / n
+    a = np.linspace(0, 1, k + 1)
+
+    def lengths(u, v):
+        p = _np(body.sample(mi.Float(u.ravel()), mi.Float(v.ravel())).p).reshape(*u.shape, 3)
+        return np.linalg.norm(np.diff(p, axis=1), axis=2).sum(1)
+
+    around = lengths(*np.meshgrid(a, t)[::1])                   # each row: u from 0 to 1
+    down = lengths(*np.meshgrid(t, a, indexing="ij"))           # each row: v from 0 to 1
+    eu, ev = body.extent()
+    assert eu == pytest.approx(around.max(), rel=2e-3)
+    assert ev == pytest.approx(down.max(), rel=2e-3)
+
+
+def test_teapot_curvature_bounds_are_the_extremes_on_a_finer_grid(variant):
+    """curvature_bounds() (sampled on a grid) against the principal curvatures on a grid
+    three times finer, of other points: within 25 % (the extremes are spikes at the rim lip, which the coarse grid
+    only approaches)."""
+    body = teapot_body()
+    n = 288
+    t = (np.arange(n) + 0.25) / n
+    u, v = np.meshgrid(t, t)
+    k_max, k_min, _, _ = principal_curvatures(body.sample(mi.Float(u.ravel()), mi.Float(v.ravel())))
+    lo, hi = body.curvature_bounds()
+    assert lo == pytest.approx(float(np.min(k_min)), rel=0.25)
+    assert hi == pytest.approx(float(np.max(k_max)), rel=0.25)
+    assert body.name == "teapot"
+
+
+# --- core/thickness.py ---------------------------------------------------------------------
+
+from mi_displace.core import surfaces, tessellate  # noqa: E402
+from mi_displace.core.thickness import crossing_check  # noqa: E402
+
+
+def _constant(value):
+    return lambda uv: (dr.full(mi.Float, value, dr.width(uv)), dr.zeros(mi.Vector2f, dr.width(uv)))
+
+
+def test_crossing_check_without_displacement_or_vertices(variant):
+    """No displacement (zero height) and an empty tessellation: nothing crosses, exactly."""
+    flat = tessellate.Tessellation(mi.Point3f([0, 1, 0], [0, 0, 1], [0, 0, 0]),
+                                   mi.Vector3f([0, 0, 0], [0, 0, 0], [1, 1, 1]),
+                                   mi.Point2f([0, 1, 0], [0, 0, 1]), mi.Vector3u([0], [1], [2]))
+    assert crossing_check(flat, thickness=0.1) == {
+        "crossing_vertices": 0, "vertices": 3, "max_depth_ratio": 0.0}
+    empty = tessellate.Tessellation(mi.Point3f(), mi.Vector3f(), mi.Point2f(), mi.Vector3u(),
+                                    displacement=mi.Float())
+    assert crossing_check(empty, thickness=0.1) == {
+        "crossing_vertices": 0, "vertices": 0, "max_depth_ratio": 0.0}
+
+
+def test_displacement_of_exactly_the_thickness_reaches_but_does_not_cross(variant):
+    """A parametric base of thickness 0.25 (torus tube radius 0.125): an inward displacement
+    of exactly 0.25 (d = 0.25 (0 - 1), exact in float32) touches the other side; a crossing
+    is a displacement *deeper* than the thickness (ratio > 1)."""
+    torus = surfaces.Torus(1.0, 0.125)
+    assert torus.thickness() == 0.25
+    t = tessellate.displace_parametric(torus, _constant(0.0), 0.25, 1.0, 16, 8)
+    assert np.all(np.asarray(t.displacement) == -0.25)
+    assert crossing_check(t, thickness=0.25)["crossing_vertices"] == 0
+    t = tessellate.displace_parametric(torus, _constant(0.0), 0.2501, 1.0, 16, 8)
+    check = crossing_check(t, thickness=0.25)
+    assert check["crossing_vertices"] == t.vertex_count
+    assert check["max_depth_ratio"] == pytest.approx(0.2501 / 0.25, rel=1e-6)

@@ -1,3 +1,80 @@
 """Tests written to kill mutants of the ddm/ modules that survived the other tests
 (issue 19, docs/testing.md, "Remaining ddm/ and core/ modules")."""
 from __future__ import annotations
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mi_displace.core.surfaces import make_base
+from mi_displace.ddm import base_maps, tiles
+
+
+def _np(v):
+    return np.stack([np.asarray(c) for c in v], 1)
+
+
+# --- ddm/tiles.py --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("normal_axis,long_axis", [(2, 0), (1, 0), (0, 2)])
+def test_stadium_is_a_closed_curve_of_evenly_spaced_distinct_points(normal_axis, long_axis):
+    """The chain's links: n points at equal arc-length steps around a stadium (a segment of
+    half length L along long_axis, swept by radius r in the plane normal to normal_axis,
+    centred at ``center``): every point at distance r from the segment, in the plane, and
+    the closing step as long as the others (no point repeated)."""
+    center, half, r, n = np.array([0.5, 0.4, 0.12]), 0.22, 0.12, 32
+    pts = tiles._stadium(center, half, r, normal_axis, long_axis, n)
+    assert pts.shape == (n, 3)
+    assert np.allclose(pts[:, normal_axis], center[normal_axis])
+    other = 3 - normal_axis - long_axis
+    x = pts[:, long_axis] - center[long_axis]
+    y = pts[:, other] - center[other]
+    dist = np.hypot(x - np.clip(x, -half, half), y)       # distance to the segment
+    assert np.allclose(dist, r, atol=1e-12)
+    step = np.linalg.norm(np.roll(pts, -1, 0) - pts, axis=1)
+    perimeter = 4 * half + 2 * np.pi * r
+    assert step.min() > 0.9 * perimeter / n and step.max() <= perimeter / n + 1e-12
+
+
+def test_chain_links_have_their_stated_sizes():
+    """chain(): a flat link (half length 0.22, radius 0.12, in the plane z = 0.12) and a
+    standing one (0.1, 0.1, in y = 0.5, centred at x = 1), both tubes of radius 0.04: the
+    tile's bounding box is theirs (the polygonal tubes lie inside it, by less than the
+    sagitta of 8 sides and 16 path points)."""
+    p = tiles.chain().positions
+    box_lo = [0.5 - 0.22 - 0.12 - 0.04, 0.5 - 0.12 - 0.04, 0.12 - 0.1 - 0.04]
+    box_hi = [1.0 + 0.1 + 0.1 + 0.04, 0.5 + 0.12 + 0.04, 0.12 + 0.1 + 0.04]
+    assert np.all(p.min(0) >= np.array(box_lo) - 1e-6) and np.all(p.max(0) <= np.array(box_hi) + 1e-6)
+    assert np.allclose(p.min(0), box_lo, atol=6e-3) and np.allclose(p.max(0), box_hi, atol=6e-3)
+
+
+# --- ddm/base_maps.py ----------------------------------------------------------------------
+
+def test_clamped_count_on_open_axes_takes_the_nearest_texel(variant):
+    """Open axes: texel i holds u = i / (r - 1); a point is clamped when its nearest texel
+    (round(u (r - 1))) is invalid — texel_valid (NumPy) and clamped_count (Dr.Jit) agree
+    with that rule, at both ends of the axis too."""
+    maps = base_maps.build_maps(make_base("plane"), 11)
+    maps.valid[:, 3] = False                 # column u = 0.3
+    maps.valid[:, 10] = False                # the last column, u = 1
+    u = np.array([0.3, 0.26, 0.34, 0.24, 0.36, 0.5, 0.96, 1.0, 1.5, 0.0])
+    v = np.full(len(u), 0.5)
+    expect = [True, True, True, False, False, False, True, True, True, False]
+    assert np.array_equal(~maps.texel_valid(u, v), expect)
+    assert maps.clamped_count(mi.Float(u), mi.Float(v)) == sum(expect)
+
+
+def test_map_error_skips_every_lookup_that_touches_an_invalid_texel(variant):
+    """A texel column marked invalid and filled with garbage (z + 10): map_error must not
+    see it (it skips points whose four lookup texels are not all valid), so the error is at
+    most that of the intact maps; a lookup that read it would err by about 10."""
+    base = make_base("torus")
+    maps = base_maps.build_maps(base, 32)
+    intact = base_maps.map_error(base, maps, 0.1, samples=1 << 14)
+    p = _np(maps.position).copy()
+    column = np.arange(32) * 32 + 5          # texels (i = 5, every row j), row-major
+    p[column, 2] += 10.0
+    maps.position = mi.Vector3f(*(mi.Float(p[:, k].astype(np.float32)) for k in range(3)))
+    maps.valid[:, 5] = False
+    assert intact < 0.1
+    assert base_maps.map_error(base, maps, 0.1, samples=1 << 14) <= intact + 1e-6
