@@ -78,3 +78,81 @@ def test_map_error_skips_every_lookup_that_touches_an_invalid_texel(variant):
     maps.valid[:, 5] = False
     assert intact < 0.1
     assert base_maps.map_error(base, maps, 0.1, samples=1 << 14) <= intact + 1e-6
+
+
+def test_geometry_image_bytes_and_resolution_halving_gives_an_int(variant):
+    """nbytes: two RGB float32 maps and a 1-byte validity bitmap per texel (§3.1);
+    choose_resolution halves a resolution that meets the tolerance while its half does too
+    and returns a power of two as an int (an error model e = 1e-2 (32 / R)^2 of the
+    diagonal, from R = 512: 128 is the smallest R with e <= 7e-4)."""
+    base = make_base("plane")
+    maps = base_maps.build_maps(base, 16, 8)
+    assert maps.nbytes == 16 * 8 * (2 * 3 * 4 + 1) and type(maps.nbytes) is int
+    base = make_base("torus")
+    diagonal = base_maps.base_sample_diagonal(base)
+    r, trials = base_maps.choose_resolution(
+        base, 7e-4, 0.1, start=512, build=lambda r: r,
+        error=lambda base, r, w: diagonal * 1e-2 * (32 / r) ** 2)
+    assert r == 128 and type(r) is int
+    assert [t[0] for t in trials] == [64, 128, 256, 512]
+
+
+# --- ddm/footprint.py ----------------------------------------------------------------------
+
+from mi_displace.ddm import footprint  # noqa: E402
+
+
+def test_pixels_per_uv_is_the_projected_step_of_a_pinhole(variant):
+    """A perspective sensor at the origin looking along +z (camera space = world space):
+    pixels per unit u / v = |d(pixel)/du| of the pinhole x / z, y / z scaled by
+    width / (2 tan(fov / 2)), against central differences of that projection."""
+    width, height, fov = 64, 48, 40.0
+    sensor = mi.load_dict({"type": "perspective", "fov": fov, "fov_axis": "x",
+                           "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 0],
+                                                                      target=[0, 0, 1], up=[0, 1, 0]),
+                           "film": {"type": "hdrfilm", "width": width, "height": height}})
+    rng = np.random.default_rng(3)
+    p = np.stack([rng.uniform(-0.3, 0.3, 50), rng.uniform(-0.2, 0.2, 50), rng.uniform(1, 3, 50)], 1)
+    du, dv = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
+    px, visible = footprint.pixels_per_uv(sensor, p, du, dv)
+    scale = width / (2 * np.tan(np.radians(fov) / 2))
+
+    def pixel(x):
+        return x[:, :2] / x[:, 2:] * scale
+
+    h = 1e-5
+    fd = [np.linalg.norm(pixel(p + h * d) - pixel(p - h * d), axis=1) / (2 * h) for d in (du, dv)]
+    assert visible.all()
+    assert np.allclose(px, np.maximum(*fd), rtol=1e-5)
+
+
+def test_orthographic_visibility_needs_front_and_frustum(variant):
+    """An orthographic sensor (camera space [-1, 1] across the film width, MARGIN 1.1): a
+    point is seen when it is in front of the near plane *and* inside the frame."""
+    sensor = mi.load_dict({"type": "orthographic",
+                           "film": {"type": "hdrfilm", "width": 40, "height": 20}})
+    p = np.array([[0.5, 0.2, 2.0],      # seen
+                  [0.5, 0.2, -2.0],     # behind the sensor
+                  [1.5, 0.2, 2.0],      # beyond the frame along x
+                  [0.5, 0.6, 2.0]])     # beyond it along y (0.55 = 1.1 x 20 / 40)
+    d = np.tile([[1.0, 0.0, 0.0]], (4, 1))
+    px, visible = footprint.pixels_per_uv(sensor, p, d, 2 * d)
+    assert visible.tolist() == [True, False, False, False]
+    assert np.allclose(px, 40 / 2 * 2)
+
+
+def test_auto_resolution_on_the_plane(variant):
+    """Found by a mutant's test: base_sample_diagonal stacked the plane's constant z (a
+    width-1 array) with n^2-wide x, y, so map_resolution="auto" failed on the plane.  The
+    plane [-1, 1]^2 has diagonal 2 sqrt 2, and its bilinear maps are exact: the coarsest R allowed (choose_resolution halved down to
+    R = 2, which check_resolution refuses: the plane failed there too)."""
+    import warnings
+
+    from mi_displace.ddm.model import DDMConfig, DDMModel
+
+    assert base_maps.base_sample_diagonal(make_base("plane")) == pytest.approx(2 * np.sqrt(2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = DDMModel(DDMConfig(base="plane", tile="stone:1", tiles_u=4, tiles_v=4,
+                               map_resolution="auto"))
+    assert m.maps.ru == base_maps.MIN_MAP_RESOLUTION and m.resolution_rule.startswith("auto: tolerance")
