@@ -156,3 +156,41 @@ def test_auto_resolution_on_the_plane(variant):
         m = DDMModel(DDMConfig(base="plane", tile="stone:1", tiles_u=4, tiles_v=4,
                                map_resolution="auto"))
     assert m.maps.ru == base_maps.MIN_MAP_RESOLUTION and m.resolution_rule.startswith("auto: tolerance")
+
+
+def test_weighted_quantile_ends():
+    """_weighted_quantile: the smallest x whose cumulative weight reaches q of the total;
+    all the weight on the largest x gives it, and zero total weight gives the largest x."""
+    x = np.array([3.0, 1.0, 2.0])
+    assert footprint._weighted_quantile(x, np.array([1.0, 0.0, 0.0]), 0.99) == 3.0
+    assert footprint._weighted_quantile(x, np.array([0.0, 1.0, 1.0]), 0.99) == 2.0
+    assert footprint._weighted_quantile(x, np.array([0.0, 1.0, 1.0]), 0.4) == 1.0
+    assert footprint._weighted_quantile(x, np.zeros(3), 0.99) == 3.0
+
+
+# --- ddm/layout.py -------------------------------------------------------------------------
+
+from mi_displace.ddm.layout import make_layout  # noqa: E402
+
+
+def test_one_cell_layout_and_one_entry_pattern():
+    lay = make_layout("rect", 1, 1)
+    assert lay.count == 1 and lay.size == (1.0, 1.0) and lay.offsets.tolist() == [[0.0, 0.0]]
+    alt = make_layout("alternate", 3, 2, n_tiles=2, pattern=[[1]])
+    assert alt.tile_index.tolist() == [1] * 6
+
+
+def test_hex_rows_alternate_their_shift_and_gaps_shrink_hexagons():
+    """Row j of a hex layout is shifted by half a cell when j is odd (every row, not only
+    row 1); gaps shrink each hexagon inside its cell, centred: su = cu (1 - gap_u),
+    sv = (4/3) cv (1 - gap_v), the cell's centre kept."""
+    n, m, gu, gv = 5, 6, 0.2, 0.1
+    lay = make_layout("hex", n, m, gap_u=gu, gap_v=gv)
+    cu, cv = 1 / n, 1 / m
+    su, sv = lay.size
+    assert su == pytest.approx(cu * (1 - gu)) and sv == pytest.approx(cv * 4 / 3 * (1 - gv))
+    o = lay.offsets.reshape(m, n, 2)
+    for j in range(m):
+        centre_u = (np.arange(n) + 0.5 + 0.5 * (j % 2)) * cu
+        assert np.allclose(o[j, :, 0] + su / 2, centre_u), j
+        assert np.allclose(o[j, :, 1] + sv / 2, (j + 0.5) * cv), j
