@@ -226,3 +226,48 @@ def test_config_defaults_are_the_documented_ones():
                 assert value == pytest.approx(float(doc)), name
             checked += 1
     assert checked >= 20      # 22 today: every row that states a default
+
+
+# --- ddm/charts.py -------------------------------------------------------------------------
+
+from pathlib import Path  # noqa: E402
+from types import SimpleNamespace  # noqa: E402
+
+from mi_displace.ddm import charts  # noqa: E402
+
+GENUS1 = str(Path(__file__).resolve().parents[2] / "scenes" / "parts" / "ddm_genus1" / "genus1.obj")
+
+
+def test_tile_reach_is_the_cell_or_the_overhang():
+    """tile_reach: how far (uv) a tile's vertices reach from its cell origin — the cell itself
+    (max(su, sv)) for a tile inside [0, 1]^2 wherever it sits, the overhang beyond it else."""
+    inside = SimpleNamespace(positions=np.array([[0.2, 0.3, 0.0], [0.8, 0.7, 0.1]]))
+    over = SimpleNamespace(positions=np.array([[-0.5, 0.1, 0.0], [1.2, 0.9, 0.1]]))
+    assert charts.tile_reach([inside], (0.1, 0.25)) == pytest.approx(0.25)
+    assert charts.tile_reach([over], (0.1, 0.05)) == pytest.approx(0.1 * 1.7)
+    assert charts.tile_reach([inside, over], (0.1, 0.25)) == pytest.approx(0.25)
+
+
+def test_chart_maps_bytes_and_stats_and_pruned_count(variant):
+    """ChartMaps stores two RGB float32 maps and a validity byte per window texel and five
+    int32 per chart; its stats count its texels and those off their chart; assign_charts
+    prunes exactly the tiles it does not keep (clamp mode keeps straddling tiles)."""
+    from mi_displace.ddm.layout import make_layout
+    from mi_displace.ddm.tiles import get_tile
+
+    from mi_displace.ddm.model import make_base as make_ddm_base
+
+    base = make_ddm_base("mesh", GENUS1)
+    maps = charts.ChartMaps(base, 32, 0.02)
+    g = maps.grid
+    texels = int(np.sum(g.width * g.height))
+    assert maps.nbytes == texels * (2 * 3 * 4 + 1) + base.chart_count * 5 * 4
+    assert maps.stats["map_texels"] == texels == len(maps.valid)
+    assert maps.stats["clamped_texels"] == int((~maps.valid).sum()) > 0
+    assert maps.stats["charts"] == base.chart_count
+    layout = make_layout("rect", 12, 12)
+    kept, stats = charts.assign_charts(layout, [get_tile("thorn")], base)
+    assert 0 < stats["tiles_pruned"] == layout.count - kept.count
+    assert stats["tiles_dropped"] == 0 and stats["charts"] == base.chart_count
+    dropped, s2 = charts.assign_charts(layout, [get_tile("thorn")], base, "drop")
+    assert s2["tiles_dropped"] == s2["tiles_straddling"] == kept.count - dropped.count > 0
