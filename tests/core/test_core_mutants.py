@@ -110,3 +110,14 @@ def test_displacement_of_exactly_the_thickness_reaches_but_does_not_cross(varian
     check = crossing_check(t, thickness=0.25)
     assert check["crossing_vertices"] == t.vertex_count
     assert check["max_depth_ratio"] == pytest.approx(0.2501 / 0.25, rel=1e-6)
+
+
+# --- core/tessellate.py --------------------------------------------------------------------
+
+def test_group_mean_of_scalars_and_vectors(variant):
+    groups = mi.UInt32([0, 1, 0, 2, 1, 0])
+    x = mi.Float([1.0, 2.0, 3.0, 10.0, 6.0, 8.0])
+    assert np.allclose(np.asarray(tessellate.group_mean(x, groups, 3)), [4, 4, 4, 10, 4, 4])
+    v = mi.Vector3f(x, 2 * x, dr.zeros(mi.Float, 6) - 1)
+    mean = _np(tessellate.group_mean(v, groups, 3))
+    assert np.allclose(mean, np.c_[[4, 4, 4, 10, 4, 4], [8, 8, 8, 20, 8, 8], -np.ones(6)])
