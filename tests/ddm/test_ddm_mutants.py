@@ -271,3 +271,90 @@ def test_chart_maps_bytes_and_stats_and_pruned_count(variant):
     assert stats["tiles_dropped"] == 0 and stats["charts"] == base.chart_count
     dropped, s2 = charts.assign_charts(layout, [get_tile("thorn")], base, "drop")
     assert s2["tiles_dropped"] == s2["tiles_straddling"] == kept.count - dropped.count > 0
+
+
+# --- ddm/mesh_base.py ----------------------------------------------------------------------
+
+def _cap(radius=2.0):
+    """A spherical cap (z > 0.3 of an icosphere) of ``radius`` with exact normals p / r and a
+    one-to-one planar UV layout (x, y) / 2 + 1/2: (positions, normals, uvs, faces)."""
+    import trimesh
+
+    ico = trimesh.creation.icosphere(3)
+    v = ico.vertices / np.linalg.norm(ico.vertices, axis=1, keepdims=True)
+    faces = ico.faces[np.all(v[ico.faces][:, :, 2] > 0.3, axis=1)]
+    used, faces = np.unique(faces, return_inverse=True)
+    v = v[used]
+    return radius * v, v, v[:, :2] / 2 + 0.5, faces.reshape(-1, 3)
+
+
+def test_mesh_curvature_bound_is_the_normal_turn_per_length(variant):
+    """On a sphere of radius r with exact normals n = p / r, |n_a - n_b| = |p_a - p_b| / r
+    on every edge: the bound is exactly +-1 / r."""
+    from mi_displace.ddm.mesh_base import MeshBase
+
+    base = MeshBase(*_cap(2.0))
+    lo, hi = base.curvature_bounds()
+    assert hi == pytest.approx(0.5, rel=1e-4) and lo == -hi
+    assert len(base.edge_kappa) == 3 * base.face_count
+
+
+def test_mesh_sample_is_differentiable_in_uv(variant):
+    """With a gradient on (u, v) the barycentrics are recomputed in uv (the ray's carry
+    none): the same S as without, and forward-mode dS/du, dS/dv = the triangle's S_u, S_v
+    (inside the layout) — also for points outside it, clamped to the boundary (where the
+    derivative is that of the clamped point, a boundary edge's direction)."""
+    from mi_displace.ddm.mesh_base import MeshBase
+
+    base = MeshBase(*_cap(2.0))
+    rng = np.random.default_rng(4)
+    r, phi = np.sqrt(rng.uniform(0, 0.16, 200)), rng.uniform(0, 2 * np.pi, 200)
+    u0, v0 = 0.5 + r * np.cos(phi), 0.5 + r * np.sin(phi)       # inside the cap's layout (uv radius < 0.46)
+    plain = base.sample(mi.Float(u0), mi.Float(v0))
+    for axis, expect in ((0, plain.dp_du), (1, plain.dp_dv)):
+        u, v = mi.Float(u0), mi.Float(v0)
+        dr.enable_grad(u, v)
+        s = base.sample(u, v)
+        dr.forward(u if axis == 0 else v)
+        assert np.allclose(_np(s.p), _np(plain.p), atol=1e-5)
+        assert np.allclose(_np(dr.grad(s.p)), _np(expect), atol=1e-3 * np.abs(_np(expect)).max())
+    # outside the layout: the clamped point moves along the boundary, so dS/du is a
+    # boundary edge's S direction: orthogonal to n and finite
+    u, v = mi.Float([0.5, 0.02]), mi.Float([0.999, 0.5])
+    dr.enable_grad(u)
+    s = base.sample(u, v)
+    dr.forward(u)
+    g = _np(dr.grad(s.p))
+    assert np.all(np.isfinite(g)) and np.abs(g).max() > 0
+
+
+def test_chart_maps_lookup_reproduces_every_stored_texel(variant):
+    """Bilinear interpolation through the texels: a lookup at a texel's own (u, v) in its
+    chart returns that texel's P and N — the last row and column of every window too."""
+    from mi_displace.ddm.model import make_base as make_ddm_base
+
+    maps = charts.ChartMaps(make_ddm_base("mesh", GENUS1), 16, 0.02)
+    g = maps.grid
+    chart = mi.UInt32(g.chart_of.astype(np.uint32))
+    p, n = maps.lookup(mi.Float(g.u.astype(np.float32)), mi.Float(g.v.astype(np.float32)),
+                       False, chart)
+    assert np.allclose(_np(p), _np(maps.position), atol=1e-5)
+    assert np.allclose(_np(n), _np(maps.normal), atol=1e-5)
+
+
+def test_model_size_check_for_one_column_and_no_refit_without_auto(variant):
+    """A single column of 2^40 cells is refused by the cell-count bound, before any layout
+    array is allocated (8 TiB); a model with a given map_resolution does not change its
+    maps for sensors (fit_to_sensors: True only when the maps changed)."""
+    import warnings
+
+    from mi_displace.ddm.model import DDMConfig, DDMModel
+
+    with pytest.raises(ValueError, match="tiles_u"):
+        DDMModel(DDMConfig(base="sphere", tile="thorn", tiles_u=1, tiles_v=2 ** 40))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = DDMModel(DDMConfig(base="sphere", tile="stone:1", tiles_u=4, tiles_v=4,
+                               map_resolution=16))
+    maps = m.maps
+    assert m.fit_to_sensors([], None) is False and m.maps is maps
