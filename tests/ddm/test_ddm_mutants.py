@@ -358,3 +358,39 @@ def test_model_size_check_for_one_column_and_no_refit_without_auto(variant):
                                map_resolution=16))
     maps = m.maps
     assert m.fit_to_sensors([], None) is False and m.maps is maps
+
+
+def test_plate_is_an_n_by_n_grid_over_the_unit_square():
+    """plate(n): (n + 1)^2 vertices, 2 n^2 triangles facing +z, every vertex used, covering
+    [0, 1]^2 once (total area 1)."""
+    p, f = tiles.plate(4)
+    assert p.shape == (25, 3) and f.shape == (32, 3)
+    assert f.max() == 24 and len(np.unique(f)) == 25
+    cross = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+    assert np.all(cross[:, 2] > 0) and 0.5 * cross[:, 2].sum() == pytest.approx(1.0)
+
+
+def test_diffusion_takes_the_first_texel_as_a_source():
+    """Texel 0 (flat index 0) is a valid source like any other: with only the two corners
+    valid, every texel nearer to (0, 0) takes texel 0."""
+    valid = np.zeros((9, 9), bool)
+    valid[0, 0] = valid[8, 8] = True
+    src, _ = base_maps.diffuse_fill(valid, False, False)
+    yy, xx = np.mgrid[0:9, 0:9]
+    near = yy + xx < 6
+    assert np.all(src[near] == 0) and np.all(src[yy + xx > 10] == 80)
+
+
+def test_prune_reads_the_tile_footprint_in_v(variant):
+    """A tile covering only the upper part of its cell (y in [0.6, 1]) over maps whose rows
+    v >= 0.5 are invalid is pruned; with only rows v >= 0.7 invalid it keeps the valid
+    texels at v = 0.5, 0.6 inside its footprint grown by one texel."""
+    layout = make_layout("rect", 1, 1)
+    bounds = np.array([[0.0, 0.6, 1.0, 1.0]])
+    maps = base_maps.build_maps(make_base("plane"), 11)
+    maps.valid[5:, :] = False
+    assert base_maps.prune(layout, bounds, maps)[1] == 1
+    maps.valid[:] = True
+    maps.valid[7:, :] = False
+    kept, pruned = base_maps.prune(layout, bounds, maps)
+    assert pruned == 0 and kept.count == 1
