@@ -394,3 +394,19 @@ def test_prune_reads_the_tile_footprint_in_v(variant):
     maps.valid[7:, :] = False
     kept, pruned = base_maps.prune(layout, bounds, maps)
     assert pruned == 0 and kept.count == 1
+
+
+def test_layout_messages_and_the_default_seed():
+    """The messages name the parameter whole; ``random`` draws with seed 0 by default (the
+    documented default of ``seed``)."""
+    import re
+
+    for name in ("u0", "v0"):
+        with pytest.raises(ValueError, match=f"^ddm: '{name}' must be finite, got nan$"):
+            make_layout("rect", 2, 2, **{name: float("nan")})
+    with pytest.raises(ValueError, match="^" + re.escape(
+            "ddm: 'pattern' must be rows of tile indices in 0..1") + "$"):
+        make_layout("alternate", 2, 2, n_tiles=2, pattern=[[0, 2]])
+    a = make_layout("random", 8, 8, n_tiles=3)
+    assert np.array_equal(a.tile_index, make_layout("random", 8, 8, n_tiles=3, seed=0).tile_index)
+    assert not np.array_equal(a.tile_index, make_layout("random", 8, 8, n_tiles=3, seed=1).tile_index)
