@@ -410,3 +410,51 @@ def test_layout_messages_and_the_default_seed():
     a = make_layout("random", 8, 8, n_tiles=3)
     assert np.array_equal(a.tile_index, make_layout("random", 8, 8, n_tiles=3, seed=0).tile_index)
     assert not np.array_equal(a.tile_index, make_layout("random", 8, 8, n_tiles=3, seed=1).tile_index)
+
+
+def test_footprint_samples_of_mesh_and_analytic_bases(variant):
+    """base_samples: a mesh base gives its face centroids with their UV areas as weights
+    (Heron's formula here), an analytic base an n x n grid of equal weights with S and its
+    derivatives at the grid points; the quantile ignores zero-weight samples below it."""
+    from mi_displace.ddm.mesh_base import MeshBase
+
+    pos, nrm, uvs, faces = _cap(2.0)
+    base = MeshBase(pos, nrm, uvs, faces)
+    p, du, dv, w = footprint.base_samples(base)
+    t = uvs[faces]
+    a, b, c = (np.linalg.norm(t[:, i] - t[:, j], axis=1) for i, j in ((0, 1), (1, 2), (2, 0)))
+    s = (a + b + c) / 2
+    assert np.allclose(w, np.sqrt(np.maximum(s * (s - a) * (s - b) * (s - c), 0)), atol=1e-9)
+    assert np.allclose(p, pos[faces].mean(1))
+    sphere = make_base("sphere")
+    p, du, dv, w = footprint.base_samples(sphere, 9)
+    assert p.shape == du.shape == dv.shape == (81, 3) and np.array_equal(w, np.ones(81))
+    u, v = base_maps.texel_coordinates(9, 9, False, False)
+    ref = sphere.sample(u, v)
+    assert np.allclose(p, _np(ref.p), atol=1e-6) and np.allclose(dv, _np(ref.dp_dv), atol=1e-5)
+    assert np.allclose(np.linalg.norm(p, axis=1), 1, atol=1e-6)
+    x = np.array([1.0, 2.0, 3.0, 4.0])
+    assert footprint._weighted_quantile(x, np.array([0.0, 0.0, 1.0, 1.0]), 0.4) == 3.0
+
+
+def test_model_w_max_rule_and_memory_ratio(variant):
+    """_w_max is the largest |w| of the mapped tiles (exact mode on the plane: the mapped z),
+    an offset below the surface included; the rule of a given map_resolution is "given";
+    mesh_over_hddm is the ratio of the two byte counts; an unknown base is named."""
+    import warnings
+
+    from mi_displace.ddm.model import DDMConfig, DDMModel
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = DDMModel(DDMConfig(base="plane", tile="thorn", tiles_u=2, tiles_v=2, height=0.1,
+                               w_offset=-0.5, mode="exact"))
+        maps = DDMModel(DDMConfig(base="sphere", tile="stone:1", tiles_u=4, tiles_v=4,
+                                  map_resolution=16))
+    p, _, _ = m.map()
+    assert m._w_max() == pytest.approx(np.abs(np.asarray(p.z)).max(), rel=1e-5)
+    assert maps.resolution_rule == "given" and maps.stats()["map_resolution_rule"] == "given"
+    r = maps.memory_report()
+    assert r["mesh_over_hddm"] == pytest.approx(r["mesh_bytes"] / r["hddm_bytes"])
+    with pytest.raises(ValueError, match=r"^ddm: unknown 'base' 'cube'; expected one of .* or 'mesh'$"):
+        DDMConfig(base="cube").check()
