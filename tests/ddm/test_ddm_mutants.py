@@ -458,3 +458,22 @@ def test_model_w_max_rule_and_memory_ratio(variant):
     assert r["mesh_over_hddm"] == pytest.approx(r["mesh_bytes"] / r["hddm_bytes"])
     with pytest.raises(ValueError, match=r"^ddm: unknown 'base' 'cube'; expected one of .* or 'mesh'$"):
         DDMConfig(base="cube").check()
+
+
+def test_chart_map_error_is_zero_on_a_flat_mesh_and_falls_with_resolution(variant):
+    """charts.map_error: per-chart bilinear maps of a flat mesh are exact (error ~ 0, normal
+    offset included); on a sphere cap (a piecewise-linear mesh: creases make the order about
+    1, docs/ddm.md) it is positive and falls with the resolution."""
+    from mi_displace.ddm.mesh_base import MeshBase
+
+    flat = MeshBase(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]]),
+                    np.tile([0, 0, 1.0], (4, 1)),
+                    np.array([[0.1, 0.1], [0.9, 0.1], [0.9, 0.9], [0.1, 0.9]]),
+                    np.array([[0, 1, 2], [0, 2, 3]]))
+    maps = charts.ChartMaps(flat, 16, 0.0)
+    assert "map_build_s" in maps.stats and maps.stats["map_build_s"] >= 0
+    assert charts.map_error(flat, maps, 0.3, samples=4096) < 1e-5
+    cap = MeshBase(*_cap(2.0))
+    e16, e32 = (charts.map_error(cap, charts.ChartMaps(cap, r, 0.0), 0.0, samples=4096)
+                for r in (16, 32))
+    assert 0 < e32 < e16 / 1.5
