@@ -62,6 +62,10 @@ def test_mesh_patches_with_random_edge_rates_are_watertight():
     assert m.is_watertight and m.is_winding_consistent and m.euler_number == 2
     # every base edge carries exactly its own segment count: E' = sum over edges + interior
     assert len(np.unique(md.groups)) == len(md.src)
+    # every vertex is used (trimesh's merge hides unused ones from the Euler number), at
+    # barycentric coordinates on its source triangle
+    np.testing.assert_array_equal(np.unique(md.faces), np.arange(len(md.src)))
+    assert md.bary.min() >= 0 and np.allclose(md.bary.sum(1), 1)
 
 
 @pytest.mark.parametrize("e,m", [(1, 0), (5, 0), (3, 7), (8, 2), (4, 4)])
@@ -281,12 +285,29 @@ def test_diced_vertices_are_all_used_and_inside_the_domain(variant, name):
         assert len(d.uv) - len(edges) + len(d.faces) == 1
 
 
-def test_diced_mesh_vertices_are_all_used():
-    ico = trimesh.creation.icosphere(1)
-    weld = np.arange(len(ico.vertices))
-    uniq, side = dicing.mesh_edges(ico.faces, weld)
-    seg = np.random.default_rng(5).integers(1, 9, len(uniq))
-    md = dicing.dice_mesh(ico.faces, weld, seg, side, 1.0)
-    np.testing.assert_array_equal(np.unique(md.faces), np.arange(len(md.src)))
-    # barycentric coordinates of points on their source triangle
-    assert md.bary.min() >= 0 and np.allclose(md.bary.sum(1), 1)
+def test_face_estimate_is_the_face_count():
+    """The face budget is checked on estimate_quad_faces before any face is built: it
+    must count exactly what quad_faces makes (simple patches, thin ones, any side rates)."""
+    rng = np.random.default_rng(6)
+    e = rng.integers(1, 7, (200, 4))
+    nu, nv = rng.integers(0, 8, 200), rng.integers(0, 8, 200)
+    e[:20], nu[:20], nv[:20] = 1, 1, 1                     # simple two-triangle patches
+    assert dicing.estimate_quad_faces(e, nu, nv) == len(dicing.quad_faces(e, nu, nv)["faces"])
+    for i in range(0, 200, 7):                             # and patch by patch
+        one = slice(i, i + 1)
+        assert dicing.estimate_quad_faces(e[one], nu[one], nv[one]) == \
+            len(dicing.quad_faces(e[one], nu[one], nv[one])["faces"])
+
+
+def test_thin_lens_sensor_is_measured_through_the_lens_centre(variant):
+    """A thin lens's chief rays (through the centre of the aperture) are the pinhole's: the
+    same pixel size and frustum as a perspective sensor of the same field of view."""
+    pin = dicing.sensor_view(mi.load_dict(camera([0, -3.2, 0], res=128)))
+    lens = dict(camera([0, -3.2, 0], res=128), type="thinlens", fov=39.6, aperture_radius=0.2,
+                focus_distance=3.2)
+    thin = dicing.sensor_view(mi.load_dict(lens))
+    assert not thin.orthographic
+    np.testing.assert_allclose(thin.origin, pin.origin, atol=1e-6)
+    np.testing.assert_allclose(thin.axes, pin.axes, atol=1e-5)
+    assert thin.pixel == pytest.approx(pin.pixel, rel=1e-4)
+    np.testing.assert_allclose(thin.half, pin.half, rtol=1e-4)

@@ -7,7 +7,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mi_displace.vdm import build, lookup, steps
+from mi_displace.vdm import assets, build, lookup, steps
 
 H, D, RES, TILING = 0.4, 0.2, 8, 2.0
 
@@ -101,16 +101,23 @@ def test_silhouette_against_the_table_mvm(variant, tmp_path, monkeypatch):
     assert not np.any(np.asarray(vdm.silhouette(si, mi.Bool(False))))
 
 
-@pytest.mark.parametrize("radius", [1.0, 3.0])
-def test_view_curvature_on_a_sphere_is_one_over_the_radius(variant, tmp_path, monkeypatch, radius):
+@pytest.mark.parametrize("radius,swap", [(1.0, False), (3.0, False), (1.0, True)])
+def test_view_curvature_on_a_sphere_is_one_over_the_radius(variant, tmp_path, monkeypatch,
+                                                           radius, swap):
     """c_V of a vdm_mesh sphere (an umbilic surface: the same along every view) is 1/R, in
     tile units tile / R, at any point and view (the per-face forms of tile_forms, linear in
-    uv, and the placement scale)."""
+    uv, and the placement scale).  The curvature forms vary with latitude only: the sphere
+    is also loaded from a file with u and v swapped, so that both uv gradients are read."""
     monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
     bsdf = {"type": "vdm", "height": {"type": "cells"}, "depth": 0.05, "tiling": 4, "res": 8,
             "theta": 4, "phi": 4, "curvatures": 2, "svd_terms": 2, "mvm_terms": 1}
-    shape = mi.load_dict({"type": "vdm_mesh", "base": "sphere", "radius": radius,
-                          "resolution": 48, "bsdf": bsdf})
+    if swap:
+        pos, uv, faces = assets.parametric_grid("sphere", 48, radius=radius)
+        path = assets.write_corner_normal_obj(tmp_path / "swapped.obj", pos, uv[:, ::-1], faces)
+        shape = mi.load_dict({"type": "vdm_mesh", "filename": str(path), "bsdf": bsdf})
+    else:
+        shape = mi.load_dict({"type": "vdm_mesh", "base": "sphere", "radius": radius,
+                              "resolution": 48, "bsdf": bsdf})
     scene = mi.load_dict({"type": "scene", "s": shape})
     rng = np.random.default_rng(3)
     n = 400
