@@ -477,3 +477,17 @@ def test_chart_map_error_is_zero_on_a_flat_mesh_and_falls_with_resolution(varian
     e16, e32 = (charts.map_error(cap, charts.ChartMaps(cap, r, 0.0), 0.0, samples=4096)
                 for r in (16, 32))
     assert 0 < e32 < e16 / 1.5
+
+
+def test_mesh_curvature_bound_reads_every_edge_of_a_triangle(variant):
+    """One triangle whose normals turn only along its edge (0, 1): the bound is that edge's
+    |n_0 - n_1| / |p_0 - p_1| (the other edges turn less per length)."""
+    from mi_displace.ddm.mesh_base import MeshBase
+
+    pos = np.array([[0, 0, 0], [0.5, 0, 0], [0, 2, 0.0]])
+    n1 = np.array([np.sin(0.3), 0, np.cos(0.3)])
+    nrm = np.array([[0, 0, 1.0], n1, [0, 0, 1.0]])
+    base = MeshBase(pos, nrm, np.array([[0, 0], [0.25, 0], [0, 1.0]]), np.array([[0, 1, 2]]))
+    lo, hi = base.curvature_bounds()
+    assert hi == pytest.approx(np.linalg.norm(n1 - [0, 0, 1]) / 0.5, rel=1e-5) and lo == -hi
+    assert base.name == "mesh"
