@@ -154,3 +154,41 @@ def test_zero_vertex_normals_fall_back_to_the_tangent_frame(variant):
     t = tessellate.displace_mesh(pos, np.zeros((4, 3)), uv, faces, None, 0.0, 0.0, 1)
     n = _np(t.base_normals)
     assert np.allclose(n, [0, -1, 0], atol=1e-6)      # (0.5, 0, 0) x (0, 0, 0.5) / 0.25
+
+
+def test_outward_rays_use_their_own_facing(variant):
+    """A vertex at the origin (n = +z) displaced +0.5: the +n ray meets a steep roof 0.3
+    above at a grazing angle (cos 0.087 < GRAZING_COS: a crease, not a crossing), the -n ray
+    a floor head-on.  The outward vertex is judged by its own (+n) ray: no crossing; moved
+    -0.5 instead it passes through the floor 0.4 below (ratio 0.5 / 0.4)."""
+    from mi_displace.core.thickness import crossing_warning
+
+    a = np.radians(5.0)
+    up = np.array([np.sin(a), 0, np.cos(a)])          # the roof rises 5 degrees off vertical
+    mid = np.array([[0, 1, 0.3], [0, -1, 0.3]])       # the roof's middle line, over the origin
+    roof = [*(mid - up), *(mid[::-1] + up)]
+    floor = [[-1, -1, -0.4], [1, -1, -0.4], [1, 1, -0.4], [-1, 1, -0.4]]
+    pos = np.array(roof + floor, np.float64)
+    faces = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+
+    def vertex(d):
+        p = mi.Point3f([0.0], [0.0], [0.0])
+        return tessellate.Tessellation(p, mi.Vector3f([0], [0], [1]), mi.Point2f([0], [0]),
+                                       mi.Vector3u([0], [0], [0]), p, mi.Vector3f([0], [0], [1]),
+                                       mi.Float([d]))
+
+    from mi_displace.core.thickness import cast_crossing_rays
+
+    rays = cast_crossing_rays(vertex(0.5), (pos, faces))
+    assert np.asarray(rays.gap[0])[0] == pytest.approx(0.3, abs=1e-4)      # the roof is met
+    assert abs(np.asarray(rays.facing[0])[0]) == pytest.approx(np.sin(a), abs=1e-4)
+    assert abs(np.asarray(rays.facing[1])[0]) == pytest.approx(1.0, abs=1e-6)   # the floor
+    assert crossing_check(vertex(0.5), base_mesh=(pos, faces))["crossing_vertices"] == 0
+    down = crossing_check(vertex(-0.5), base_mesh=(pos, faces))
+    assert down["crossing_vertices"] == 1
+    assert down["max_depth_ratio"] == pytest.approx(0.5 / 0.4, rel=1e-3)
+    assert crossing_warning("displaced 'x'", down) == (
+        "displaced 'x': displacement deeper than the local thickness of the base at 1 of 1 "
+        "vertices (up to 1.25x the distance to the base's other side): the displaced surface "
+        "passes through the base and the reference is wrong there; lower 'scale' or raise "
+        "'midlevel'")

@@ -491,3 +491,22 @@ def test_mesh_curvature_bound_reads_every_edge_of_a_triangle(variant):
     lo, hi = base.curvature_bounds()
     assert hi == pytest.approx(np.linalg.norm(n1 - [0, 0, 1]) / 0.5, rel=1e-5) and lo == -hi
     assert base.name == "mesh"
+
+
+def test_hexagon_covers_its_hexagon_once_and_zero_normals_become_up(tmp_path):
+    """hexagon(): a height field whose faces all face up and cover the regular hexagon
+    inscribed in [0, 1]^2 exactly once (area 3/4 of the square: (3 sqrt 3 / 2) / (2 sqrt 3));
+    make_tile: a vanishing given normal becomes +z; a file of another suffix is refused by
+    name."""
+    t = tiles.hexagon()
+    p, f = t.positions.astype(np.float64), t.faces.astype(np.int64)
+    a, b = p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]]
+    signed = 0.5 * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+    assert np.all(signed > 0) and signed.sum() == pytest.approx(0.75, rel=1e-5)
+    tri = tiles.make_tile("t", [[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]],
+                           normals=[[0, 0, 0], [0, 0, 2.0], [1e-13, 0, 0]])
+    assert np.array_equal(tri.normals, [[0, 0, 1], [0, 0, 1], [0, 0, 1]])
+    bad = tmp_path / "tile.txt"
+    bad.write_text("x")
+    with pytest.raises(ValueError, match=r"^ddm: tile file '.*tile\.txt' must be \.obj or \.ply$"):
+        tiles.load_tile_file(bad)
