@@ -510,3 +510,49 @@ def test_hexagon_covers_its_hexagon_once_and_zero_normals_become_up(tmp_path):
     bad.write_text("x")
     with pytest.raises(ValueError, match=r"^ddm: tile file '.*tile\.txt' must be \.obj or \.ply$"):
         tiles.load_tile_file(bad)
+
+
+def test_prune_grows_the_footprint_by_one_texel_and_auto_starts_at_a_power_of_two(variant):
+    """prune: a tile over y in [0, 0.3] reads rows up to 0.3 (r - 1) + 1 = row 4 of an
+    11-row map: pruned when rows 0..4 are invalid although row 5 is valid.
+    choose_resolution from its default start: with an error model met by R = 32 and not by
+    16 the answer is 32 (a power of two)."""
+    layout = make_layout("rect", 1, 1)
+    maps = base_maps.build_maps(make_base("plane"), 11)
+    maps.valid[:5, :] = False
+    assert base_maps.prune(layout, np.array([[0.0, 0.0, 1.0, 0.3]]), maps)[1] == 1
+    base = make_base("torus")
+    diagonal = base_maps.base_sample_diagonal(base)
+    r, _ = base_maps.choose_resolution(base, 1.5e-2, 0.1, build=lambda r: r,
+                                       error=lambda base, r, w: diagonal * 1e-2 * (32 / r) ** 2)
+    assert r == 32
+
+
+def test_model_stats_clamped_mask_and_fold_message(variant):
+    """An exact-mode model prunes nothing (tiles_pruned 0); on a mesh base (a sphere cap
+    with a disc-shaped UV layout) a mapped vertex is clamped exactly when its uv lies off the
+    layout (the disc of radius ~0.47 about (0.5, 0.5)); the fold warning of an analytic base
+    counts "sampled points of the base"."""
+    import warnings
+
+    from mi_displace.ddm.mesh_base import MeshBase
+    from mi_displace.ddm.model import DDMConfig, DDMModel, FoldingWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = DDMModel(DDMConfig(base="mesh", tile="stone:1", tiles_u=6, tiles_v=6, height=0.05,
+                               mode="exact"), base=MeshBase(*_cap(2.0)))
+    assert m.stats()["tiles_pruned"] == m.pruned
+    _, _, uv = m.map()
+    clamped = m.clamped_mask(uv)
+    radius = np.hypot(np.asarray(uv.x) - 0.5, np.asarray(uv.y) - 0.5)
+    assert clamped.shape == radius.shape and clamped.any() and not clamped.all()
+    assert not clamped[radius < 0.44].any() and clamped[radius > 0.48].all()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        exact = DDMModel(DDMConfig(base="sphere", tile="stone:1", tiles_u=4, tiles_v=4,
+                                   mode="exact"))
+    assert exact.stats()["tiles_pruned"] == 0
+    with pytest.warns(FoldingWarning, match=r" of [0-9,]+ sampled points of the base \(det"):
+        DDMModel(DDMConfig(base="sphere", tile="thorn", tiles_u=4, tiles_v=4, height=-4.0,
+                           mode="exact"))
