@@ -404,6 +404,8 @@ def test_layout_messages_and_the_default_seed():
     for name in ("u0", "v0"):
         with pytest.raises(ValueError, match=f"^ddm: '{name}' must be finite, got nan$"):
             make_layout("rect", 2, 2, **{name: float("nan")})
+    with pytest.raises(ValueError, match="'tiles_v'"):
+        make_layout("rect", 2, 0)
     with pytest.raises(ValueError, match="^" + re.escape(
             "ddm: 'pattern' must be rows of tile indices in 0..1") + "$"):
         make_layout("alternate", 2, 2, n_tiles=2, pattern=[[0, 2]])
@@ -556,3 +558,19 @@ def test_model_stats_clamped_mask_and_fold_message(variant):
     with pytest.warns(FoldingWarning, match=r" of [0-9,]+ sampled points of the base \(det"):
         DDMModel(DDMConfig(base="sphere", tile="thorn", tiles_u=4, tiles_v=4, height=-4.0,
                            mode="exact"))
+
+
+def test_mesh_normal_derivatives_match_finite_differences_inside_a_face(variant):
+    """dn/du, dn/dv of the unit interpolated normal inside one triangle whose vertex normals
+    differ by up to ~70 degrees (|interpolated n| ~ 0.8 at the centre), against central
+    differences of n in uv."""
+    from mi_displace.ddm.mesh_base import MeshBase
+
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])
+    nrm = np.array([[0, 0, 1.0], [np.sin(1.2), 0, np.cos(1.2)], [0, np.sin(0.8), np.cos(0.8)]])
+    base = MeshBase(pos, nrm, np.array([[0.1, 0.1], [0.9, 0.1], [0.1, 0.9]]), np.array([[0, 1, 2]]))
+    u, v, h = mi.Float([0.35, 0.3]), mi.Float([0.35, 0.25]), 1e-3
+    s = base.sample(u, v)
+    for d, (du, dv) in ((s.dn_du, (h, 0)), (s.dn_dv, (0, h))):
+        fd = (_np(base.sample(u + du, v + dv).n) - _np(base.sample(u - du, v - dv).n)) / (2 * h)
+        assert np.allclose(_np(d), fd, atol=2e-3 * np.abs(fd).max())
