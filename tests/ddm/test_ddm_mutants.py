@@ -574,3 +574,21 @@ def test_mesh_normal_derivatives_match_finite_differences_inside_a_face(variant)
     for d, (du, dv) in ((s.dn_du, (h, 0)), (s.dn_dv, (0, h))):
         fd = (_np(base.sample(u + du, v + dv).n) - _np(base.sample(u - du, v - dv).n)) / (2 * h)
         assert np.allclose(_np(d), fd, atol=2e-3 * np.abs(fd).max())
+
+
+def test_perspective_visibility_needs_front_and_both_frame_axes(variant):
+    """Perspective (64 x 48, x_fov 40 degrees, MARGIN 1.1): seen when in front of the near
+    plane and |x / z| <= 1.1 t and |y / z| <= 1.1 t (48 / 64), t = tan(20 degrees)."""
+    sensor = mi.load_dict({"type": "perspective", "fov": 40.0, "fov_axis": "x",
+                           "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 0],
+                                                                      target=[0, 0, 1], up=[0, 1, 0]),
+                           "film": {"type": "hdrfilm", "width": 64, "height": 48}})
+    t = np.tan(np.radians(20.0))
+    p = np.array([[0.1, 0.1, 1.0],                      # seen
+                  [0.1, 0.1, -1.0],                     # behind
+                  [1.2 * t, 0.0, 1.0],                  # beyond the frame along x
+                  [0.0, 0.9 * t, 1.0],                  # beyond it along y (> 1.1 t 0.75)
+                  [0.0, 0.8 * t, 1.0]])                 # inside (< 0.825 t)
+    d = np.tile([[1.0, 0.0, 0.0]], (5, 1))
+    _, visible = footprint.pixels_per_uv(sensor, p, d, d)
+    assert visible.tolist() == [True, False, False, False, True]
