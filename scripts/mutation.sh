@@ -47,7 +47,7 @@ declare -A SELECTION=(
   [mi_displace/evaluate/metrics.py]="tests/evaluate/test_metrics.py"
   [mi_displace/core/heightfield.py]="tests/core/test_heightfield.py"
   [mi_displace/core/surfaces.py]="tests/core/test_surfaces.py"
-  [mi_displace/core/tessellate.py]="tests/core/test_tessellate.py"
+  [mi_displace/core/tessellate.py]="tests/core/test_tessellate.py tests/core/test_core_mutants.py"
   [mi_displace/ddm/mapping.py]="tests/ddm/test_ddm_mapping.py tests/ddm/test_ddm_orientation.py"
   [mi_displace/vdm/mesh_curvature.py]="tests/vdm/test_vdm_mesh_curvature.py tests/vdm/test_vdm_unseen.py::test_per_corner_normals_give_the_torus_curvature tests/vdm/test_vdm_unseen.py::test_zero_curvature_on_a_curved_mesh_warns"
   [mi_displace/vdm/table.py]="tests/vdm/test_vdm_table.py"
@@ -70,6 +70,15 @@ declare -A SELECTION=(
   [mi_displace/volume/field.py]="tests/volume/test_volume_normals.py tests/volume/test_volume_albedo.py tests/volume/test_volume_render.py tests/volume/test_volume_mutants.py"
   [mi_displace/slicing/geometry.py]="tests/slicing/test_slicing.py tests/slicing/test_slicing_mutants.py"
   [mi_displace/slicing/depth_object.py]="tests/slicing/test_depth_object.py tests/slicing/test_slicing_mutants.py"
+  [mi_displace/ddm/tiles.py]="tests/ddm/test_ddm_tiles.py tests/ddm/test_ddm_mutants.py"
+  [mi_displace/ddm/base_maps.py]="tests/ddm/test_ddm_base_maps.py tests/ddm/test_ddm_mutants.py"
+  [mi_displace/ddm/model.py]="tests/ddm/test_ddm_mapping.py tests/ddm/test_ddm_base_maps.py tests/ddm/test_ddm_mutants.py"
+  [mi_displace/ddm/charts.py]="tests/ddm/test_ddm_charts.py tests/ddm/test_ddm_polygonal.py tests/ddm/test_ddm_mutants.py"
+  [mi_displace/ddm/mesh_base.py]="tests/ddm/test_ddm_polygonal.py tests/ddm/test_ddm_charts.py tests/ddm/test_ddm_mutants.py"
+  [mi_displace/ddm/layout.py]="tests/ddm/test_ddm_layout.py tests/ddm/test_ddm_mutants.py"
+  [mi_displace/ddm/footprint.py]="tests/ddm/test_ddm_footprint.py tests/ddm/test_ddm_mutants.py"
+  [mi_displace/core/bezier.py]="tests/ddm/test_ddm_bezier.py tests/core/test_core_mutants.py"
+  [mi_displace/core/thickness.py]="tests/core/test_thickness.py tests/core/test_core_mutants.py"
 )
 
 root=$PWD

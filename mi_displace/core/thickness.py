@@ -109,7 +109,7 @@ def crossing_check(t: Tessellation, base_mesh: tuple | None = None,
         the base along sign(d) n) over crossing vertices (> 1 there; 0 without crossings).
     """
     n_vertices = t.vertex_count
-    if t.displacement is None:
+    if t.displacement is None or not n_vertices:   # (Dr.Jit cannot mix width 0 and 1)
         return {"crossing_vertices": 0, "vertices": n_vertices, "max_depth_ratio": 0.0}
     d = dr.detach(t.displacement)
     if base_mesh is None:
@@ -137,9 +137,8 @@ def crossing_check(t: Tessellation, base_mesh: tuple | None = None,
         hit = (reach > 2 * rays.eps) & (dr.abs(facing) > GRAZING_COS) & (approach > gap)
         ratio = dr.select(hit, approach / gap, 0.0)
         crossing = hit
-    count = int(dr.count(crossing)[0]) if n_vertices else 0
-    return {"crossing_vertices": count, "vertices": n_vertices,
-            "max_depth_ratio": float(dr.max(ratio)[0]) if n_vertices else 0.0}
+    return {"crossing_vertices": int(dr.count(crossing)[0]), "vertices": n_vertices,
+            "max_depth_ratio": float(dr.max(ratio)[0])}
 
 
 def crossing_warning(owner: str, check: dict) -> str | None:

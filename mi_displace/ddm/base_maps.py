@@ -342,7 +342,7 @@ def choose_resolution(base, tolerance: float, w_max: float, start: int = 32, bui
     docs/ddm.md; a mesh base is piecewise linear, its creases make it 1), so one
     measurement at ``start`` predicts R; the prediction is checked, doubled until it holds (at most
     :data:`AUTO_MAX_RESOLUTION`, which is returned if even that misses) and halved while
-    the half still holds.
+    the half still holds (not below :data:`MIN_MAP_RESOLUTION`).
 
     Returns:
         ``(resolution, trials)`` with trials = [(R, relative error), ...].
@@ -365,7 +365,7 @@ def choose_resolution(base, tolerance: float, w_max: float, start: int = 32, bui
         r = min(AUTO_MAX_RESOLUTION, 2 ** math.ceil(math.log2(predicted)))
         while error(r) > tolerance and r < AUTO_MAX_RESOLUTION:
             r *= 2
-    while r > 2 and error(r // 2) <= tolerance:
+    while r // 2 >= MIN_MAP_RESOLUTION and error(r // 2) <= tolerance:
         r //= 2
     return r, sorted(trials.items())
 
@@ -373,5 +373,6 @@ def choose_resolution(base, tolerance: float, w_max: float, start: int = 32, bui
 def base_sample_diagonal(base, n: int = 64) -> float:
     """Bounding-box diagonal of the base, from an n x n sample (object units)."""
     u, v = texel_coordinates(n, n, False, False)
-    p = np.stack([np.asarray(c) for c in base.sample(u, v).p], 1)
+    # a constant coordinate (the plane's z) comes back as a width-1 array: broadcast it
+    p = np.stack([np.broadcast_to(np.asarray(c), (n * n,)) for c in base.sample(u, v).p], 1)
     return float(np.linalg.norm(p.max(0) - p.min(0)))
