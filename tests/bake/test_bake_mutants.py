@@ -5,7 +5,7 @@ import re
 
 import numpy as np
 import pytest
-from conftest import plane
+from conftest import _sphere_mesh, plane
 from test_bake_extremes import _stack
 
 from mi_displace.bake import baker
@@ -145,7 +145,6 @@ def test_object_normals_of_a_sphere_are_radial(variant):
     # at each texel is the radial direction of the texel's UV point (analytic parametrisation)
     import drjit as dr
     import mitsuba as mi
-    from conftest import _sphere_mesh
 
     from mi_displace.core import surfaces
 
@@ -272,7 +271,6 @@ def test_void_texels_of_a_closed_low_poly_take_their_neighbours_displacement(var
     # garbage (0.5) in the map: its vertices take the harmonic interpolation of the measured
     # displacement vectors around them (0.04 radially, so a little shorter where the ring's
     # directions fan out), and no face is dropped
-    from conftest import _sphere_mesh
 
     from mi_displace.bake.restore import restore
 

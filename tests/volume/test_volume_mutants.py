@@ -106,9 +106,9 @@ def _rotation(ax, ay, az):
 def _texture_and_fd_jacobian(m, s, pw, h=1e-3):
     """(N, 3, 3) J read from the D_k ``s`` of map ``m`` at world points pw (N, 3), and the
     central differences (step h) of m's exact world D there."""
-    _, _, jac, _ = s.lookup(_p(pw), True)
+    jac, _ = s.derivatives(_p(pw))
     n = len(pw)
-    # lookup gives J^T; an all-zero entry may be a one-lane literal
+    # derivatives gives J^T; an all-zero entry may be a one-lane literal
     J = np.stack([np.broadcast_to(np.array(jac[j][i]), n) for i in range(3) for j in range(3)],
                  -1).reshape(-1, 3, 3)
     fd = np.zeros_like(J)
@@ -147,7 +147,8 @@ def test_peel_skips_its_undisplaced_cells(variant):
     assert s.nonzero is not None and 0.05 < 1 - s.flags.mean() < 0.9
     r = 1.2 * 0.6
     far = _p([[1 - 0.97 * r, 0.5, 0.5 + 0.97 * r], [1 + 0.97 * r, 0.2, 0.5 + 0.97 * r]])
-    d, a, jac, ga = s.lookup(far, True)
+    d, a = s.lookup(far)
+    jac, ga = s.derivatives(far)
     assert np.abs(_np(d)).max() == 0 and np.array(a).min() == 1
     assert max(np.abs(np.array(jac[i][j])).max() for i in range(3) for j in range(3)) == 0
 
@@ -191,9 +192,9 @@ def test_majorant_is_the_tight_bound_of_sigma_t(variant):
     assert v.nbytes() == {"object": v.obj.nbytes(), "maps": 0}
 
 
-def test_a_lookup_without_the_alpha_gradient_is_not_reused_for_blend(variant):
-    # normal(lookup=...) reuses a caller's lookup only if it holds what the method needs:
-    # blend needs grad alpha, so a lookup made without it is redone (same normals as none)
+def test_a_lookup_without_the_alpha_gradient_gives_the_same_blend_normals(variant):
+    # normal(lookup=...) reuses a caller's D_k pre-image and reads the terms its method needs
+    # itself: a lookup made without grad alpha gives the blend normals of none
     import mitsuba as mi
 
     from mi_displace.volume.displacement import PlacedMap
@@ -203,12 +204,12 @@ def test_a_lookup_without_the_alpha_gradient_is_not_reused_for_blend(variant):
                      tf_low=0.0, tf_high=1.0)
     p = _p(np.random.default_rng(6).uniform(-0.3, 0.3, (2000, 3)))
     fb = mi.Vector3f(0, 0, 1)
-    plain = v.lookup(p, normals=True, alpha_gradient=False)
+    plain = v.chain.approximate(p, normals=True, alpha_gradient=False)
     assert plain.B is not None and plain.galpha is None
     for method in ("jacobian", "blend"):
         np.testing.assert_allclose(_np(v.normal(p, method, fb, lookup=plain)), _np(v.normal(p, method, fb)),
                                    atol=1e-6)
-    full = v.lookup(p, normals=True)
+    full = v.chain.approximate(p, normals=True)
     np.testing.assert_allclose(_np(v.normal(p, "blend", fb, lookup=full)), _np(v.normal(p, "blend", fb)), atol=1e-6)
 
 
@@ -257,7 +258,8 @@ def test_alpha_gradient_texture_matches_finite_differences(variant):
     rng = np.random.default_rng(8)
     l = np.c_[rng.uniform(0.35, 0.75, 600), rng.uniform(0.3, 0.7, 600), rng.uniform(0.45, 0.75, 600)]
     pw = l @ m4[:3, :3].T
-    _, alpha, _, ga = s.lookup(_p(pw), True)
+    _, alpha = s.lookup(_p(pw))
+    _, ga = s.derivatives(_p(pw))
     a0 = np.array(alpha)
     keep = (a0 > 0.05) & (a0 < 0.95)
     assert keep.sum() > 50
@@ -266,7 +268,7 @@ def test_alpha_gradient_texture_matches_finite_differences(variant):
     for k in range(3):
         e = np.zeros(3)
         e[k] = h
-        fd[:, k] = (np.array(s.lookup(_p(pw + e), False)[1]) - np.array(s.lookup(_p(pw - e), False)[1])) / (2 * h)
+        fd[:, k] = (np.array(s.lookup(_p(pw + e))[1]) - np.array(s.lookup(_p(pw - e))[1])) / (2 * h)
     g = _np(ga)
     err = np.linalg.norm(g[keep] - fd[keep], axis=1)
     assert np.median(err) < 0.1 * np.median(np.linalg.norm(fd[keep], axis=1))
@@ -327,7 +329,7 @@ def test_blend_is_eq_7_between_the_jacobian_and_the_cut_normal(variant):
     pts = np.c_[rng.uniform(-0.25, 0.25, (20000, 2)), rng.uniform(-0.04, 0.13, 20000)]
     p = _p(pts)
     fb = mi.Vector3f(0, 0, 1)
-    r = v.lookup(p, normals=True)
+    r = v.chain.approximate(p, normals=True)
     a, ga = np.array(r.alpha), _np(r.galpha)
     n_j = _np(v.normal(p, "jacobian", fb))
     n_b = _np(v.normal(p, "blend", fb))
