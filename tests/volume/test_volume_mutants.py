@@ -389,3 +389,22 @@ def test_placement_vector_to_world_is_the_linear_part(variant):
     v = rng.normal(size=(50, 3))
     got = _np(Placement(m).vector_to_world(mi.Vector3f(*(v[:, i] for i in range(3)))))
     np.testing.assert_allclose(got, v @ m[:3, :3].T, rtol=1e-5, atol=1e-5)
+
+
+def test_changed_rebuilds_the_precomputed_composite(variant):
+    """After a map edit, ``changed()`` drops the composite D_k: the next read is a composite
+    of the edited chain (as a fresh chain's), not the stale one."""
+    from mi_displace.volume.displacement import DisplacementChain, PlacedMap
+
+    def chain(amount):
+        return DisplacementChain([PlacedMap("gaussian", {"amount": amount, "sigma": 0.2})], bits=32,
+                                 composition="precomputed", composite_resolution=(24, 24, 24))
+
+    pts = _p(np.random.default_rng(23).uniform(0.2, 0.8, (2000, 3)))
+    edited = chain(0.2)
+    before = _np(edited.approximate(pts).p)
+    edited.maps[0].set({"amount": 0.5})
+    edited.changed()
+    after = _np(edited.approximate(pts).p)
+    assert np.abs(after - before).max() > 0.01
+    np.testing.assert_array_equal(after, _np(chain(0.5).approximate(pts).p))
