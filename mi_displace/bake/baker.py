@@ -407,8 +407,8 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
                      "diagnostics": diagnostics,
                      "variant": mi.variant()},
         "counts": {**count, "covered": n_cov, "padded": int(filled.sum() - n_cov), **extra},
-        "displacement_range": [float(maps["displacement"][covered].min()) if n_cov else 0.0,
-                               float(maps["displacement"][covered].max()) if n_cov else 0.0],
+        "displacement_range": [float(maps["displacement"][covered].min()),   # n_cov > 0 here
+                               float(maps["displacement"][covered].max())],
         "timings": timings,
     }
     result = BakeResult(maps, status, covered, low, record)

@@ -33,15 +33,16 @@ def pixel_footprint(sensor) -> dict:
     world units per pixel (orthographic, else 0) and tan of the half field of view along x
     and y of a sensor (float64, world space)."""
     w, h = (int(c) for c in sensor.film().crop_size())
-    xs = np.array([0.5, 0.5 + 1.0 / w, 0.5, 0.0, 1.0])
-    ys = np.array([0.5, 0.5, 0.5 + 1.0 / h, 0.5, 0.5])
+    # the centre, one pixel to its right and the middle of the right edge of the film
+    xs = np.array([0.5, 0.5 + 1.0 / w, 1.0])
+    ys = np.array([0.5, 0.5, 0.5])
     ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(mi.Float(xs), mi.Float(ys)), mi.Point2f(0.5, 0.5))
-    o = np.broadcast_to(np.asarray(ray.o, np.float64).reshape(3, -1).T, (5, 3))
-    d = np.broadcast_to(np.asarray(ray.d, np.float64).reshape(3, -1).T, (5, 3))
+    o = np.broadcast_to(np.asarray(ray.o, np.float64).reshape(3, -1).T, (3, 3))
+    d = np.broadcast_to(np.asarray(ray.d, np.float64).reshape(3, -1).T, (3, 3))
     angle = math.acos(min(1.0, float(d[0] @ d[1])))
-    half = math.tan(math.acos(min(1.0, float(d[0] @ d[4]))))
+    half = math.tan(math.acos(min(1.0, float(d[0] @ d[2]))))
     if angle > 1e-9:    # perspective: rays leave the near plane; their apex is the eye
-        t = np.linalg.lstsq(np.stack([d[0], -d[4]], 1), o[0] - o[4], rcond=None)[0]
+        t = np.linalg.lstsq(np.stack([d[0], -d[2]], 1), o[0] - o[2], rcond=None)[0]
         return {"origin": o[0] - t[0] * d[0], "direction": d[0].copy(), "angle": angle,
                 "spacing": 0.0, "tan_half": half, "aspect": h / w}
     return {"origin": o[0].copy(), "direction": d[0].copy(), "angle": 0.0,

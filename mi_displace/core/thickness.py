@@ -105,8 +105,10 @@ def crossing_check(t: Tessellation, base_mesh: tuple | None = None,
 
     Returns:
         ``{"crossing_vertices": int, "vertices": int, "max_depth_ratio": float}`` where
-        ``max_depth_ratio`` is the largest (|d| + the other side's approach) / (distance to
-        the base along sign(d) n) over crossing vertices (> 1 there; 0 without crossings).
+        ``max_depth_ratio`` is, on a mesh base, the largest (|d| + the other side's approach)
+        / (distance to the base along sign(d) n) over crossing vertices (> 1 there; 0 without
+        crossings); on a parametric base, the largest inward depth / thickness over all
+        vertices (> 1 exactly where there are crossings).
     """
     n_vertices = t.vertex_count
     if t.displacement is None or not n_vertices:   # (Dr.Jit cannot mix width 0 and 1)
