@@ -257,9 +257,18 @@ def sample_xy(view: View, index: mi.UInt32, aa: int) -> tuple[mi.UInt32, mi.UInt
     return (pixel % w) * aa + sub % aa, (pixel // w) * aa + sub // aa
 
 
-def _bbox(view: View, c: list):
-    """Grid bounding box of triangles with clip-space vertices ``c`` (3 Point3f),
-    clipped at the near plane.
+#: The edges of a triangle (vertex index pairs).
+TRIANGLE = ((0, 1), (1, 2), (2, 0))
+#: Every pair of a prism's six vertices (layer 0: 0-2, top layer: 3-5): the edges of their
+#: convex hull are among them, so cutting them all bounds the hull (:func:`rasterise_layers`).
+PRISM = tuple((i, j) for i in range(6) for j in range(i + 1, 6))
+
+
+def _bbox(view: View, c: list, pairs=TRIANGLE):
+    """Grid bounding box of the convex hulls of clip-space points ``c`` (a list of
+    Point3f: a triangle's 3 vertices, a prism's 6), clipped at the near plane (``pairs``:
+    vertex pairs that include the hull's edges, whose near-plane crossings bound the
+    clipped hull).
 
     Returns:
         (x0, y0, width, height) of the candidate sample rectangle (Int32; width or height
@@ -276,17 +285,17 @@ def _bbox(view: View, c: list):
             hi[i] = dr.select(ok, dr.maximum(hi[i], g), hi[i])
 
     if view.perspective:
-        for i in range(3):  # the polygon clipped at z = near: front vertices + crossings
-            p, q = c[i], c[(i + 1) % 3]
+        for p in c:  # the hull clipped at z = near: front vertices + crossings
             include(p, p.z >= view.near)
+        for i, j in pairs:
+            p, q = c[i], c[j]
             crosses = (p.z < view.near) != (q.z < view.near)
             x = dr.lerp(p, q, (view.near - p.z) / (q.z - p.z))
             include(mi.Point3f(x.x, x.y, view.near), crosses)
     else:
         for p in c:
             include(p, mi.Bool(True))
-    z_lo = dr.minimum(dr.minimum(c[0].z, c[1].z), c[2].z)
-    z_hi = dr.maximum(dr.maximum(c[0].z, c[1].z), c[2].z)
+    z_lo, z_hi = _z_range(c)
     keep = (z_hi >= view.near) & (z_lo <= view.far)
     size = (view.width, view.height)
     start, count = [], []
@@ -299,16 +308,25 @@ def _bbox(view: View, c: list):
     return start[0], start[1], count[0], count[1]
 
 
+def _z_range(c: list) -> tuple[mi.Float, mi.Float]:
+    """Smallest and largest depth of clip-space points ``c``."""
+    z_lo, z_hi = c[0].z, c[0].z
+    for p in c[1:]:
+        z_lo, z_hi = dr.minimum(z_lo, p.z), dr.maximum(z_hi, p.z)
+    return z_lo, z_hi
+
+
 def screen_boxes(view: View, geom: Geometry, clip: mi.Point3f, tri: mi.UInt32):
     """Candidate sample rectangles ``(x0, y0, width, height)`` (Int32) of triangles ``tri``
     (``clip``: :func:`to_clip`), as :func:`rasterise` bins them (culling, binning)."""
     return _bbox(view, _triangles(geom, clip, tri)[1])
 
 
-def _row_span(view: View, c: list, Y: mi.UInt32, x0: mi.Int32, x1: mi.Int32):
-    """Samples [xs, xe) of grid row ``Y`` that triangles with clip-space vertices ``c`` may
-    cover, within their box columns [x0, x1): the row's centre line cut with the projected
-    edges it meets (those whose y range reaches within :data:`SPAN_MARGIN` of the line:
+def _row_span(view: View, c: list, Y: mi.UInt32, x0: mi.Int32, x1: mi.Int32, pairs=TRIANGLE):
+    """Samples [xs, xe) of grid row ``Y`` that the convex hulls of clip-space points ``c``
+    (triangles; prisms with ``pairs`` = :data:`PRISM`) may cover, within their box columns
+    [x0, x1): the row's centre line cut with the projected
+    segments ``pairs`` it meets (those whose y range reaches within :data:`SPAN_MARGIN` of the line:
     each one's point nearest to the line, so a superset of the exact span, whose ends lie
     on such edges), widened by :data:`SPAN_MARGIN` (the homogeneous edge test of a sliver
     triangle can round a sample inside that lies a fraction of a cell outside its
@@ -317,8 +335,8 @@ def _row_span(view: View, c: list, Y: mi.UInt32, x0: mi.Int32, x1: mi.Int32):
     y = mi.Float(Y) + 0.5
     g = [view.grid(p) for p in c]
     lo, hi = mi.Float(dr.inf), mi.Float(-dr.inf)
-    for i in range(3):
-        (ax, ay), (bx, by) = g[i], g[(i + 1) % 3]
+    for i, j in pairs:
+        (ax, ay), (bx, by) = g[i], g[j]
         flat = ay == by
         s = dr.clip((y - ay) / dr.select(flat, 1.0, by - ay), 0.0, 1.0)
         # only edges the row's line meets (within the margin) bound the span
@@ -330,7 +348,7 @@ def _row_span(view: View, c: list, Y: mi.UInt32, x0: mi.Int32, x1: mi.Int32):
     xs = mi.Int32(dr.clip(dr.ceil(lo - 0.5 - margin), mi.Float(x0), mi.Float(x1)))
     xe = mi.Int32(dr.clip(dr.floor(hi - 0.5 + margin) + 1, mi.Float(x0), mi.Float(x1)))
     if view.perspective:
-        behind = (c[0].z < view.near) | (c[1].z < view.near) | (c[2].z < view.near)
+        behind = _z_range(c)[0] < view.near
         xs, xe = dr.select(behind, x0, xs), dr.select(behind, x1, xe)
     ok = dr.isfinite(lo) & dr.isfinite(hi)
     return dr.select(ok, xs, x0), dr.select(ok, dr.maximum(xe, xs), x1)
@@ -354,9 +372,15 @@ def _edge_setup(view: View, face: mi.Vector3u, c: list):
 def _edges_at(view: View, setup, X: mi.UInt32, Y: mi.UInt32, active: mi.Bool):
     """Inside test, barycentrics and depth at grid sample (X, Y) of triangles prepared by
     :func:`_edge_setup`: ``(inside, b1, b2, z)``."""
-    E, (z0, z1, z2) = setup
+    E, z = setup
     q = mi.Vector3f(mi.Float(X) + 0.5, mi.Float(Y) + 0.5, 1.0)
-    e = [dr.dot(Ei, q) for Ei in E]
+    return _inside(view, [dr.dot(Ei, q) for Ei in E], z, active)
+
+
+def _inside(view: View, e: list, z: tuple, active: mi.Bool):
+    """Inside test, barycentrics and depth from the edge-function values ``e`` (3 Float)
+    of a sample and the vertex depths ``z``: ``(inside, b1, b2, z)``."""
+    z0, z1, z2 = z
     total = e[0] + e[1] + e[2]
     inside = active & (total != 0) & (
         ((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0)))
@@ -439,6 +463,47 @@ def _behind(view: View, aa: int, keys: mi.UInt64, x0, y0, bw, bh, z_lo) -> mi.Bo
     return some & (z_lo > far)
 
 
+def _row_pieces(bx0: mi.Int32, by0: mi.Int32, bw: mi.Int32, bh: mi.Int32):
+    """The rows of sample boxes ``(x0, y0, width, height)`` cut into pieces of at most
+    :data:`SPAN` samples, enumerated in one flat range (an exclusive prefix sum over the
+    per-box counts; each piece finds its box by a segmented prefix sum).
+
+    Yields:
+        per batch of at most :data:`CHUNK` pieces, ``(k, Y, x0, x1)``: the box of each
+        piece (UInt32 index into the boxes), its row and its columns [x0, x1) (Int32).
+    """
+    pieces = (mi.UInt32(bw) + (SPAN - 1)) // SPAN   # row pieces of at most SPAN samples
+    counts = mi.UInt32(bh) * pieces
+    offsets = dr.prefix_sum(mi.UInt64(counts))  # exclusive
+    dr.eval(offsets, bx0, by0, bw, pieces)
+    total = int(dr.sum(mi.UInt64(counts))[0])
+    for start in range(0, total, CHUNK):  # work batches, not boxes
+        size = min(CHUNK, total - start)
+        seg = dr.zeros(mi.UInt32, size)
+        inner = (offsets > start) & (offsets < start + size)
+        dr.scatter_add(seg, 1, mi.UInt32(offsets - start), inner)
+        first = mi.UInt32(dr.count(offsets <= start)) - 1
+        k = first + dr.prefix_sum(seg) + seg
+        j = mi.UInt32(start + dr.arange(mi.UInt64, size) - dr.gather(mi.UInt64, offsets, k))
+        # >= 1 also in the LLVM backend's padding lanes, where a gather yields 0 and an
+        # integer division by it raises SIGFPE
+        n = dr.maximum(dr.gather(mi.UInt32, pieces, k), 1)
+        Y = mi.UInt32(dr.gather(mi.Int32, by0, k) + mi.Int32(j // n))
+        x0 = dr.gather(mi.Int32, bx0, k) + mi.Int32(j % n) * SPAN
+        x1 = dr.minimum(x0 + SPAN, dr.gather(mi.Int32, bx0, k) + dr.gather(mi.Int32, bw, k))
+        yield k, Y, x0, x1
+
+
+def _key(z: mi.Float, t: mi.UInt32) -> mi.UInt64:
+    """Depth-test key of a fragment at view depth ``z`` of triangle ``t`` (module doc, 5)."""
+    return (mi.UInt64(_depth_bits(z)) << 32) | mi.UInt64(t)
+
+
+def _depth_bits(z: mi.Float) -> mi.UInt32:
+    """float32 bits of a depth >= 0 (positive floats order like their bits)."""
+    return dr.reinterpret_array(mi.UInt32, dr.maximum(z, 0.0))
+
+
 def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
               small: int = 1, floor: mi.UInt64 | None = None, alpha=None, initial=None):
     """Depth-test every triangle of ``geom`` at every grid sample of ``view``.
@@ -484,10 +549,10 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
     clip = to_clip(view, geom)
 
     def depth_test(t, X, Y, inside, b1, b2, z, test=None):
-        depth = dr.reinterpret_array(mi.UInt32, dr.maximum(z, 0.0))
+        depth = _depth_bits(z)
         index = sample_index(view, X, Y, aa)
         if with_ids:
-            key = (mi.UInt64(depth) << 32) | mi.UInt64(t)
+            key = _key(z, t)
             if floor is not None:
                 inside &= key > dr.gather(mi.UInt64, floor, index, inside)
         # early depth test (a read; the minimum only falls, so a stale value is safe): a
@@ -509,8 +574,7 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
     x0, y0, bw, bh = _bbox(view, c)
     count = mi.UInt32(bw * bh)
     if initial is not None and with_ids:   # hierarchical z: whole triangles behind the buffer
-        z_lo = dr.minimum(dr.minimum(c[0].z, c[1].z), c[2].z)
-        count = dr.select(_behind(view, aa, initial, x0, y0, bw, bh, z_lo), 0, count)
+        count = dr.select(_behind(view, aa, initial, x0, y0, bw, bh, _z_range(c)[0]), 0, count)
     # small triangles (<= `small` candidate samples): tested by the thread that bins them
     w = mi.UInt32(dr.maximum(bw, 1))  # >= 1: no division by zero, even in padding lanes
     for i in range(small):
@@ -538,27 +602,8 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
     if dr.width(busy) == 0:
         return keys, clip
     _, c = _triangles(geom, clip, busy)
-    bx0, by0, bw, bh = _bbox(view, c)
-    pieces = (mi.UInt32(bw) + (SPAN - 1)) // SPAN   # row pieces of at most SPAN samples
-    counts = mi.UInt32(bh) * pieces
-    offsets = dr.prefix_sum(mi.UInt64(counts))  # exclusive
-    dr.eval(offsets, bx0, by0, bw, pieces)
-    total = int(dr.sum(mi.UInt64(counts))[0])
-    for start in range(0, total, CHUNK):  # work batches, not triangles
-        size = min(CHUNK, total - start)
-        seg = dr.zeros(mi.UInt32, size)
-        inner = (offsets > start) & (offsets < start + size)
-        dr.scatter_add(seg, 1, mi.UInt32(offsets - start), inner)
-        first = mi.UInt32(dr.count(offsets <= start)) - 1
-        k = first + dr.prefix_sum(seg) + seg
+    for k, Y, x0, x1 in _row_pieces(*_bbox(view, c)):
         t = dr.gather(mi.UInt32, busy, k)
-        j = mi.UInt32(start + dr.arange(mi.UInt64, size) - dr.gather(mi.UInt64, offsets, k))
-        # >= 1 also in the LLVM backend's padding lanes, where a gather yields 0 and an
-        # integer division by it raises SIGFPE
-        n = dr.maximum(dr.gather(mi.UInt32, pieces, k), 1)
-        Y = mi.UInt32(dr.gather(mi.Int32, by0, k) + mi.Int32(j // n))
-        x0 = dr.gather(mi.Int32, bx0, k) + mi.Int32(j % n) * SPAN
-        x1 = dr.minimum(x0 + SPAN, dr.gather(mi.Int32, bx0, k) + dr.gather(mi.Int32, bw, k))
         face, c = _triangles(geom, clip, t)
         xs, xe = _row_span(view, c, Y, x0, x1)
         test = None if alpha is None else alpha(t, mi.Bool(True))
@@ -569,6 +614,159 @@ def rasterise(view: View, geom: Geometry, with_ids: bool = True, aa: int = 1,
             return (X + 1,)
 
         dr.while_loop((mi.UInt32(xs),), lambda X: X < mi.UInt32(xe), body, label="raster_rows")
+        dr.eval(keys)
+    return keys, clip
+
+
+def _layer_edge_setup(view: View, face: mi.Vector3u, c: list, m: list):
+    """Per prism (vertex indices ``face``, clip-space vertices ``c`` of layer 0 and their
+    steps ``m`` per layer): the edge functions of layer k as quadratics in k, one
+    ``(A, B, C)`` triple of vectors per edge with ``e_i(k) = (A + k B + k^2 C) . (qx, qy, 1)``
+    — h(c + k m) x h'(c' + k m') expanded, in :func:`_edge_setup`'s canonical vertex order
+    (the prisms sharing an edge get bit-exactly opposite values at every k)."""
+    hc = [view.homogeneous(p) for p in c]
+    hm = [mi.Vector3f(v.x, v.y, v.z if view.perspective else 0.0) for v in m]
+    E = []
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        swap = face[j] > face[k]
+        a, b = [dr.select(swap, x[k], x[j]) for x in (hc, hm)], [dr.select(swap, x[j], x[k]) for x in (hc, hm)]
+        sign = dr.select(swap, -1.0, 1.0)
+        E.append((sign * dr.cross(a[0], b[0]), sign * (dr.cross(a[0], b[1]) + dr.cross(a[1], b[0])),
+                  sign * dr.cross(a[1], b[1])))
+    return E
+
+
+def _layer_range(coef: list, top: float) -> tuple[mi.Float, mi.Float]:
+    """Copies [lo, hi] (integral Floats; empty when lo > hi) of a prism that may cover a
+    sample whose edge functions are ``a + k (b + k c)`` for ``coef`` = 3 x (a, b, c): a
+    superset of those whose three values share a sign (the inside test).  Per sign s and
+    edge, s (a + b k) >= -tol with tol >= |c| top^2 (the quadratic term over [0, top]) plus
+    a margin far above float32 rounding of the values; widened by one copy."""
+    lo, hi = mi.Float(dr.inf), mi.Float(-dr.inf)
+    for s in (1.0, -1.0):
+        lo_s, hi_s = mi.Float(0.0), mi.Float(top)
+        for a, b, c in coef:
+            quad = dr.abs(c) * (top * top)
+            tol = quad + 1e-5 * (dr.abs(a) + dr.abs(b) * top + quad)
+            a_, b_ = s * a + tol, s * b   # need a_ + b_ k >= 0
+            root = -a_ / dr.select(b_ == 0, 1.0, b_)
+            lo_s = dr.select(b_ > 0, dr.maximum(lo_s, root), lo_s)
+            hi_s = dr.select(b_ < 0, dr.minimum(hi_s, root), hi_s)
+            lo_s = dr.select((b_ == 0) & (a_ < 0), dr.inf, lo_s)
+        some = lo_s <= hi_s
+        lo, hi = dr.select(some, dr.minimum(lo, lo_s), lo), dr.select(some, dr.maximum(hi, hi_s), hi)
+    lo = dr.maximum(dr.ceil(lo) - 1.0, 0.0)
+    hi = dr.minimum(dr.floor(hi) + 1.0, top)
+    return lo, hi
+
+
+def rasterise_layers(view: View, geom: Geometry, step: mi.Vector3f, layers: int, aa: int = 1,
+                     alpha=None, initial=None):
+    """Depth-test ``layers`` offset copies of the triangles of ``geom`` at every grid sample
+    of ``view``: copy k (k = 0 ... layers - 1) of vertex v lies at ``positions[v] + k
+    step[v]`` (world units).  The result is :func:`rasterise`'s of the copies drawn as one
+    mesh with face k F + f for copy k of face f (F faces): keys ``depth << 32 | k F + f``.
+
+    The copies of one triangle form a prism, drawn by one thread per piece of a row of the
+    prism's screen box (the hull of its bottom and top triangles, :data:`PRISM`), looping
+    over the piece's samples and, per sample, over the copies: the clip-space vertices are
+    affine in k, so each edge function is a quadratic in k whose coefficients are set up
+    once per sample (:func:`_layer_edge_setup`), and a copy costs a few multiply-adds.  The
+    copies are visited from the end of the stack nearer the viewer; the alpha test (a
+    discard) runs only for a fragment in front of the thread's best so far, and one atomic
+    minimum per sample writes that best: exact whatever the order, and front to back it
+    tests about one fragment per prism and sample instead of one per copy.
+
+    Args:
+        step: per-vertex offset between consecutive copies, (V,) Vector3f [world units].
+        alpha: optional per-fragment test: ``alpha(f, active)`` reads what it needs of
+            faces ``f`` (once per thread) and returns ``test(index, k, b1, b2, active) ->
+            Bool`` of their copy k's fragments at samples ``index`` (:func:`sample_index`).
+        initial: optional keys to draw over (unchanged: the result is a copy); prisms
+            behind every stored fragment of their box are skipped whole (:func:`_behind`).
+
+    Returns:
+        (keys, clip): the (width * height,) UInt64 buffer and the clip-space vertices of
+        copy 0 (None without triangles).
+    """
+    samples = view.width * view.height
+    keys = dr.full(mi.UInt64, EMPTY, samples) if initial is None else dr.copy(initial)
+    n_faces = dr.width(geom.faces)
+    if n_faces == 0 or samples == 0 or layers < 1:
+        return keys, None
+    clip = to_clip(view, geom)
+    dclip = view.to_clip @ step   # the linear part: clip-space offset per copy
+    dr.eval(dclip)
+    top = float(layers - 1)
+
+    def prism(f, active=True):
+        face, c = _triangles(geom, clip, f, active)
+        m = [dr.gather(mi.Vector3f, dclip, face[i], active) for i in range(3)]
+        return face, c, m, c + [ci + top * mk for ci, mk in zip(c, m)]
+
+    every = dr.arange(mi.UInt32, n_faces)
+    _, _, _, hull = prism(every)
+    x0, y0, bw, bh = _bbox(view, hull, PRISM)
+    if initial is not None:   # hierarchical z: whole prisms behind the buffer
+        gone = _behind(view, aa, initial, x0, y0, bw, bh, _z_range(hull)[0])
+        bw = dr.select(gone, 0, bw)
+    for k, Y, xa, xb in _row_pieces(x0, y0, bw, bh):
+        f = k
+        face, c, m, hull = prism(f)
+        xs, xe = _row_span(view, hull, Y, xa, xb, PRISM)
+        E = _layer_edge_setup(view, face, c, m)
+        z0, dz = [ci.z for ci in c], [mk.z for mk in m]
+        # the stack from its nearer end: the top copy first where it lies in front
+        down = (dz[0] + dz[1] + dz[2]) < 0
+        test = None if alpha is None else alpha(f, mi.Bool(True))
+
+        def sample(X):
+            q = mi.Vector3f(mi.Float(X) + 0.5, mi.Float(Y) + 0.5, 1.0)
+            coef = [[dr.dot(v, q) for v in edge] for edge in E]
+            index = sample_index(view, X, Y, aa)
+            # early depth read (the buffer as at launch), kept as (depth, id) in 32 bits
+            stored = dr.gather(mi.UInt64, keys, index)
+            best_z = dr.select(stored == EMPTY, dr.inf,
+                               dr.reinterpret_array(mi.Float, mi.UInt32(stored >> 32)))
+            best_t = mi.UInt32(stored & 0xFFFFFFFF)
+            lo, hi = _layer_range(coef, top)
+
+            def layer(kf):   # (inside, b1, b2, z) of copy kf; z: its plane's, even outside
+                e = [a + kf * (b + kf * cc) for a, b, cc in coef]
+                return _inside(view, e, [z + kf * d for z, d in zip(z0, dz)], mi.Bool(True))
+
+            # the ray meets the copies' planes from its nearer end of the range on
+            z_lo, z_hi = layer(lo)[3], layer(hi)[3]
+            from_hi = dr.select(dr.isfinite(z_lo) & dr.isfinite(z_hi) & (z_lo != z_hi), z_hi < z_lo, down)
+            kf = dr.select(from_hi, hi, lo)
+            step_k = dr.select(from_hi, -1.0, 1.0)
+
+            def copy(kf, best_z, best_t, won, behind):
+                inside, b1, b2, z = layer(kf)
+                k = mi.UInt32(kf)
+                t = k * n_faces + f
+                z = dr.maximum(z, 0.0)
+                behind = inside & (z > best_z)
+                inside &= (z < best_z) | ((z == best_z) & (t < best_t))
+                if test is not None:
+                    inside = dr.if_stmt((inside, k, b1, b2), inside,
+                                        lambda m_, k_, u_, v_: (m_ & test(index, k_, u_, v_, m_),),
+                                        lambda m_, k_, u_, v_: (m_,), label="raster_layer_alpha")[0]
+                return (kf + step_k, dr.select(inside, z, best_z), dr.select(inside, t, best_t),
+                        won | inside, behind)
+
+            # front to back, the first copy to pass is the front-most, and once a copy lies
+            # behind the stored fragment so do the rest: stop there
+            _, best_z, best_t, won, _ = dr.while_loop(
+                (kf, best_z, best_t, mi.Bool(False), mi.Bool(False)),
+                lambda kf, bz, bt, won, behind: (kf >= lo) & (kf <= hi) & ~won & ~behind, copy,
+                label="raster_layers")
+            dr.scatter_reduce(dr.ReduceOp.Min, keys, _key(best_z, best_t), index, won,
+                              mode=dr.ReduceMode.Direct)
+            return (X + 1,)
+
+        dr.while_loop((mi.UInt32(xs),), lambda X: X < mi.UInt32(xe), sample, label="raster_layer_rows")
         dr.eval(keys)
     return keys, clip
 

@@ -138,6 +138,71 @@ def _store(hit: Hit, found, slices, prim, bary, p) -> Hit:
     return Hit(found, p, uv, n, su, sv).select(found, hit)
 
 
+def _corner_uvs(slices, idx: list, active) -> list:
+    """The uv of slice vertices ``idx`` (3 UInt32: a triangle's corners), 3 Point2f."""
+    return [mi.Point2f(*(dr.gather(mi.Float, slices.uv, 2 * v + k, active) for k in range(2)))
+            for v in idx]
+
+
+def _passes(volume: SlicedVolume, uvs: list, b1, b2, h_alpha, active) -> mi.Bool:
+    """The α-test (§3.1 / §3.2, a discard) of fragments at barycentrics (b1, b2) of
+    triangles with corner uvs ``uvs``, against the slice's value ``h_alpha``."""
+    uv = (1.0 - b1 - b2) * uvs[0] + b1 * uvs[1] + b2 * uvs[2]
+    return active & alpha_test(volume.alpha, volume.D(uv), h_alpha)
+
+
+def _draw_polygons(volume: SlicedVolume, view, aa, slices, mine, start):
+    """The slice triangles (not the walls) whose screen box holds a sample of ``mine``,
+    rasterised one by one.  Returns ``(keys, clip, geom, ids)``: ``ids`` maps the keys'
+    triangles to the family's faces."""
+    full = slices.geometry()
+    every = dr.arange(mi.UInt32, dr.width(full.faces))
+    boxes = zbuffer.screen_boxes(view, full, zbuffer.to_clip(view, full), every)
+    keep = dr.compress((_box_counts(view, aa, mine, boxes) > 0)
+                       & ((dr.gather(mi.UInt32, slices.flags, every) & 1) == 0))
+    geom = dataclasses.replace(full, faces=dr.gather(mi.Vector3u, full.faces, keep))
+
+    def alpha(tri, active):   # corners read once per thread; h_α interpolated (§3.2 ramps)
+        idx = slices.corners(dr.gather(mi.UInt32, keep, tri, active), active)
+        uvs = _corner_uvs(slices, idx, active)
+        ramps = [dr.gather(mi.Float, slices.ramp, v, active) for v in idx]
+
+        def test(sample, b1, b2, active):
+            ramp = (1.0 - b1 - b2) * ramps[0] + b1 * ramps[1] + b2 * ramps[2]
+            return _passes(volume, uvs, b1, b2, ramp, active)
+
+        return test
+
+    keys, clip = zbuffer.rasterise(view, geom, True, aa=aa, alpha=alpha, initial=start)
+    return keys, clip, geom, keep
+
+
+def _draw_aligned(volume: SlicedVolume, view, aa, slices, start):
+    """Direction a's slices — the base lifted to h = k / N, slice k's faces k F + f of the
+    family's mesh (:func:`mi_displace.slicing.geometry.aligned_slices`) — rasterised as
+    layered copies of slice 0 (:func:`mi_displace.render.zbuffer.rasterise_layers`: one
+    prism per base polygon, front to back).  Returns ``(keys, clip, geom, None)``: the keys'
+    triangles are the family's faces."""
+    bm, n = volume.bm, volume.counts["a"]
+    V, F = len(bm.positions), len(bm.faces)
+    full = slices.geometry()
+    base = dataclasses.replace(full, positions=dr.gather(mi.Point3f, full.positions, dr.arange(mi.UInt32, V)),
+                               faces=dr.gather(mi.Vector3u, full.faces, dr.arange(mi.UInt32, F)))
+    step = mi.Vector3f(*(mi.Float(c) for c in (bm.extrude * (volume.scale / n)).astype(np.float32).T))
+
+    def alpha(f, active):   # every copy has slice 0's uvs; copy k's h_α is k / N
+        uvs = _corner_uvs(slices, slices.corners(f, active), active)
+        return lambda sample, k, b1, b2, active: _passes(volume, uvs, b1, b2, mi.Float(k) / n, active)
+
+    if volume.alpha == "basic":
+        # slice 0 passes the basic test everywhere (D >= 0), so its fragments are in the
+        # result wherever nothing nearer passes: drawn first without α-test (a depth
+        # pre-pass, same keys), they cull the prisms and fragments behind the surface
+        start, _ = zbuffer.rasterise(view, base, True, aa=aa, initial=start)
+    keys, _ = zbuffer.rasterise_layers(view, base, step, n, aa=aa, alpha=alpha, initial=start)
+    return keys, zbuffer.to_clip(view, full), full, None
+
+
 def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
     """Rasterise the slices of ``volume`` at the samples of ``sensor`` (module doc).
 
@@ -195,34 +260,15 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
         # test (and the hierarchical z skips triangles with no sample of this family)
         start = dr.select(mine, initial, 0)
         slices = volume.families[fam][0]
-        # drawn: the slice triangles (not the walls) whose screen box holds a sample of
-        # this family
-        full = slices.geometry()
-        every = dr.arange(mi.UInt32, dr.width(full.faces))
-        boxes = zbuffer.screen_boxes(view, full, zbuffer.to_clip(view, full), every)
-        keep = dr.compress((_box_counts(view, aa, mine, boxes) > 0)
-                           & ((dr.gather(mi.UInt32, slices.flags, every) & 1) == 0))
-        geom = dataclasses.replace(full, faces=dr.gather(mi.Vector3u, full.faces, keep))
-
-        def alpha(tri, active):   # §3.1 / §3.2: the fragment's α-test, a discard
-            idx = slices.corners(dr.gather(mi.UInt32, keep, tri, active), active)
-            uvs = [mi.Point2f(*(dr.gather(mi.Float, slices.uv, 2 * v + k, active) for k in range(2)))
-                   for v in idx]
-            ramps = [dr.gather(mi.Float, slices.ramp, v, active) for v in idx]
-
-            def test(sample, b1, b2, active):
-                b0 = 1.0 - b1 - b2
-                uv = b0 * uvs[0] + b1 * uvs[1] + b2 * uvs[2]
-                ramp = b0 * ramps[0] + b1 * ramps[1] + b2 * ramps[2]
-                return active & alpha_test(volume.alpha, volume.D(uv), ramp)
-
-            return test
-
-        keys, clip = zbuffer.rasterise(view, geom, True, aa=aa, alpha=alpha, initial=start)
+        if fam == "a":   # offset copies of the base: drawn as prisms, front to back
+            keys, clip, geom, ids = _draw_aligned(volume, view, aa, slices, start)
+        else:
+            keys, clip, geom, ids = _draw_polygons(volume, view, aa, slices, mine, start)
         found = mine & ((keys & low) != low)
         tri = mi.UInt32(keys & low)
         bary, p = _resolve(view, aa, clip, geom, tri, found, ray)
-        hit = _store(hit, found, slices, dr.gather(mi.UInt32, keep, tri, found), bary, p)
+        hit = _store(hit, found, slices, tri if ids is None else dr.gather(mi.UInt32, ids, tri, found),
+                     bary, p)
         dr.eval(hit.found, hit.p, hit.uv, hit.n, hit.su, hit.sv)
     hit.n = dr.normalize(hit.n)
     dr.eval(hit.n)
