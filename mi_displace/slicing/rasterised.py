@@ -50,7 +50,9 @@ class FrameBuffer:
     Attributes:
         view: the sensor's :class:`~mi_displace.render.zbuffer.View`; aa: sub-samples per
             pixel side (the sample order of :func:`mi_displace.render.raster.pixel_rays`).
-        covered: per sample, whether its ray meets the volume's walls (Bool).
+        covered: per sample, whether the frame answers for it: its ray meets the volume's
+            walls (Bool; every sample when one family is drawn without the base polygons:
+            the walls then decide nothing, as every slice lies inside them).
         hit: per sample, the fragment (:class:`~mi_displace.slicing.sliced.Hit`; ``found``
             False where every fragment was discarded).
         eye: (3,) camera position (perspective) or None (orthographic).
@@ -121,21 +123,30 @@ def _box_counts(view: zbuffer.View, aa: int, mask: mi.Bool, boxes) -> mi.UInt32:
     return dr.select(some, at(x1, y1) - at(x0, y1) - at(x1, y0) + at(x0, y0), 0)
 
 
-def _resolve(view, aa, clip, geom, tri, found, ray):
-    """Barycentrics and point on the sample's ray of fragments of triangles ``tri``."""
-    X, Y = zbuffer.sample_xy(view, dr.arange(mi.UInt32, dr.width(tri)), aa)
-    _, b1, b2, _ = zbuffer.fragment(view, clip, geom, tri, X, Y, found)
-    face = dr.gather(mi.Vector3u, geom.faces, tri, found)
-    p = [dr.gather(mi.Point3f, geom.positions, face[i], found) for i in range(3)]
-    t = dr.dot((1.0 - b1 - b2) * p[0] + b1 * p[1] + b2 * p[2] - ray.o, ray.d)
-    return (b1, b2), ray.o + t * ray.d
-
-
-def _store(hit: Hit, found, slices, prim, bary, p) -> Hit:
-    """``hit`` with the fragments of ``slices`` faces ``prim`` where ``found``."""
-    uv = mi.Point2f(*slices.lerp(slices.uv, 2, slices.corners(prim, found), bary, found))
-    n, su, sv = slices.frame(prim, bary, found)
-    return Hit(found, p, uv, n, su, sv).select(found, hit)
+def _store(hit: Hit, view, aa, ray, found, keys, clip, geom, slices, prim_of=None) -> Hit:
+    """``hit`` with the fragments of ``keys`` where ``found`` (only those samples are
+    resolved): barycentrics of the key's triangle of ``geom`` (clip-space vertices
+    ``clip``) at the sample, the point on the sample's ray, the attributes of face
+    ``prim_of[tri]`` (or ``tri``) of ``slices``."""
+    index = dr.compress(found)
+    if dr.width(index) == 0:
+        return hit
+    tri = mi.UInt32(dr.gather(mi.UInt64, keys, index) & 0xFFFFFFFF)
+    X, Y = zbuffer.sample_xy(view, index, aa)
+    _, b1, b2, _ = zbuffer.fragment(view, clip, geom, tri, X, Y, True)
+    face = dr.gather(mi.Vector3u, geom.faces, tri)
+    v = [dr.gather(mi.Point3f, geom.positions, face[i]) for i in range(3)]
+    o, d = dr.gather(mi.Point3f, ray.o, index), dr.gather(mi.Vector3f, ray.d, index)
+    p = o + dr.dot((1.0 - b1 - b2) * v[0] + b1 * v[1] + b2 * v[2] - o, d) * d
+    prim = tri if prim_of is None else dr.gather(mi.UInt32, prim_of, tri)
+    uv = mi.Point2f(*slices.lerp(slices.uv, 2, slices.corners(prim, True), (b1, b2), True))
+    n, su, sv = slices.frame(prim, (b1, b2), True)
+    fields = []
+    for old, new in zip(hit.fields(), (True, p, uv, n, su, sv)):
+        old = dr.copy(old)
+        dr.scatter(old, type(old)(new), index)
+        fields.append(old)
+    return Hit(*fields)
 
 
 def _corner_uvs(slices, idx: list, active) -> list:
@@ -217,14 +228,17 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
     ray, _, _, _ = pixel_rays(sensor, aa)
     n = dr.width(ray.d)
     low = mi.UInt64(0xFFFFFFFF)
-    # the first wall each sample's ray meets: the proxy face the walk starts from
     walls = volume.walls_scene
     wgeom = walls.geometry()
-    wkeys, _ = zbuffer.rasterise(view, wgeom, True, aa=aa)
-    covered = wkeys != zbuffer.EMPTY
-    third = dr.full(mi.Float, 1 / 3, n)
-    bn, su, sv = walls.frame(mi.UInt32(wkeys & low), (third, third), covered)
-    choice = volume.choose(ray.d, dr.normalize(bn), su, sv)
+    if len(FAMILIES[volume.direction]) > 1 or volume.opaque_base:
+        # the first wall each sample's ray meets: the proxy face the walk starts from
+        wkeys, _ = zbuffer.rasterise(view, wgeom, True, aa=aa)
+        covered = wkeys != zbuffer.EMPTY
+        third = dr.full(mi.Float, 1 / 3, n)
+        bn, su, sv = walls.frame(mi.UInt32(wkeys & low), (third, third), covered)
+        choice = volume.choose(ray.d, dr.normalize(bn), su, sv)
+    else:   # one family, no base: the walls decide nothing (every slice lies inside them)
+        covered, choice = dr.full(mi.Bool, True, n), dr.zeros(mi.UInt32, n)
     dr.eval(covered, choice)
     hit = Hit(dr.zeros(mi.Bool, n), mi.Point3f(ray.o), dr.zeros(mi.Point2f, n),
               dr.zeros(mi.Vector3f, n), dr.zeros(mi.Vector3f, n), dr.zeros(mi.Vector3f, n))
@@ -245,10 +259,8 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
         # samples whose ray misses the volume start at the nearest key: nothing drawn there
         base, bclip = zbuffer.rasterise(view, bgeom, True, aa=aa, alpha=leaving,
                                         initial=dr.select(covered, initial, 0))
-        found = covered & (base != zbuffer.EMPTY)
-        tri = mi.UInt32(base & low)
-        bary, p = _resolve(view, aa, bclip, bgeom, tri, found, ray)
-        hit = _store(hit, found, walls, dr.gather(mi.UInt32, bottoms, tri, found), bary, p)
+        hit = _store(hit, view, aa, ray, covered & (base != zbuffer.EMPTY), base, bclip, bgeom,
+                     walls, bottoms)
         initial = base | low
         dr.eval(initial, hit.found, hit.p, hit.uv, hit.n, hit.su, hit.sv)
     for index, fam in enumerate(FAMILIES[volume.direction]):   # a, b, c: three at most
@@ -264,11 +276,7 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
             keys, clip, geom, ids = _draw_aligned(volume, view, aa, slices, start)
         else:
             keys, clip, geom, ids = _draw_polygons(volume, view, aa, slices, mine, start)
-        found = mine & ((keys & low) != low)
-        tri = mi.UInt32(keys & low)
-        bary, p = _resolve(view, aa, clip, geom, tri, found, ray)
-        hit = _store(hit, found, slices, tri if ids is None else dr.gather(mi.UInt32, ids, tri, found),
-                     bary, p)
+        hit = _store(hit, view, aa, ray, mine & ((keys & low) != low), keys, clip, geom, slices, ids)
         dr.eval(hit.found, hit.p, hit.uv, hit.n, hit.su, hit.sv)
     hit.n = dr.normalize(hit.n)
     dr.eval(hit.n)

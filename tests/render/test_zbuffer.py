@@ -246,3 +246,63 @@ def test_row_spans_cover_every_sample_the_box_does(variant, monkeypatch):
             drawn = np.array(rows) != (zbuffer.EMPTY if kw.get("with_ids", True) else 0xFFFFFFFF)
             assert drawn.mean() > 0.1
             assert np.array_equal(np.array(rows), np.array(boxes)), kw
+
+
+def layered(mesh, layers, seed=0):
+    """Per-vertex steps of thin, non-parallel layers over ``mesh`` (2 % of each triangle's
+    size along its normal, tilted by noise) and the explicit copies as one mesh (copy k
+    of face f is face k F + f, as :func:`zbuffer.rasterise_layers` numbers them)."""
+    p = np.array(mi.traverse(mesh)["vertex_positions"]).reshape(-1, 3)
+    f = np.array(mi.traverse(mesh)["faces"]).reshape(-1, 3)
+    tri = p[f]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    size = np.sqrt(np.linalg.norm(n, axis=1, keepdims=True))
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    noise = np.random.default_rng(seed).normal(size=tri.shape) * 0.2
+    step = np.zeros_like(p)
+    step[f] = 0.02 / layers * size[:, :, None] * (n[:, None] + noise)   # vertices are per triangle
+    copies = np.concatenate([p + k * step.astype(np.float32) for k in range(layers)])
+    faces = np.concatenate([f + k * len(p) for k in range(layers)])
+    return mi.Vector3f(*(mi.Float(c) for c in step.astype(np.float32).T)), make_mesh("copies", copies, faces)
+
+
+@pytest.mark.parametrize("kind", ["perspective", "orthographic", "crop"])
+def test_layers_are_the_copies_drawn_as_triangles(variant, kind):
+    """zbuffer.rasterise_layers (one prism per triangle, copies visited front to back with
+    an early exit) against zbuffer.rasterise of the copies as an explicit mesh: the same
+    fragment wins (same triangle, or a depth within rounding: the copies' vertices are
+    rounded differently), with a discard per (sample, copy) and over an existing buffer;
+    triangles across and behind the near plane, slivers, 1 and 2 samples per pixel."""
+    mesh = random_triangles(seed=4)
+    layers = 9
+    step, copies = layered(mesh, layers)
+    scene = load({"m": mesh}, sensor_of(kind))
+    geom, explicit = zbuffer.gather_geometry([mesh]), zbuffer.gather_geometry([copies])
+    F = dr.width(geom.faces)
+
+    def discard(s, k):   # a checker over samples and copies
+        return ((s // 3 + k) % 2) == 0
+
+    by_copy = lambda t, active: lambda s, b1, b2, a: discard(s, t // F)
+    by_layer = lambda f, active: lambda s, k, b1, b2, a: discard(s, k)
+    for aa in (1, 2):
+        view = zbuffer.view_from_sensor(scene.sensors()[0], aa)
+        wall = quad("wall", [[-9, 0.5, -9], [9, 0.5, -9], [9, 0.5, 9], [-9, 0.5, 9]])
+        over, _ = zbuffer.rasterise(view, zbuffer.gather_geometry([wall]), aa=aa)
+        for kw_layers, kw_copies in (({}, {}), ({"alpha": by_layer}, {"alpha": by_copy}),
+                                     ({"initial": over}, {"initial": over})):
+            got, _ = zbuffer.rasterise_layers(view, geom, step, layers, aa=aa, **kw_layers)
+            ref, _ = zbuffer.rasterise(view, explicit, aa=aa, **kw_copies)
+            got, ref = np.array(got), np.array(ref)
+            drawn = ref != zbuffer.EMPTY
+            assert drawn.mean() > 0.1
+            assert (got != zbuffer.EMPTY).sum() == pytest.approx(drawn.sum(), rel=2e-3)
+            low = np.uint64(0xFFFFFFFF)
+            same = (got & low) == (ref & low)
+            assert same[drawn].mean() > 0.99, (kind, aa, kw_layers.keys())
+            z = lambda k: (k >> np.uint64(32)).astype(np.uint32).view(np.float32)
+            both = drawn & (got != zbuffer.EMPTY)
+            assert np.all(np.abs(z(got[both]) - z(ref[both])) <= 2e-3 * z(ref[both]))
+            if "initial" in kw_layers:   # nothing drawn behind the wall
+                mine = got != zbuffer.EMPTY
+                assert np.all(z(got[mine]) <= z(np.array(over)[mine]))
