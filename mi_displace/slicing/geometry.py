@@ -196,6 +196,19 @@ def concat(parts: list[SliceMesh]) -> SliceMesh:
                      np.concatenate([p.faces + o for p, o in zip(parts, offsets)]))
 
 
+#: Floats per vertex of :func:`vertex_table` (a power of two: one packet gather).
+TABLE_WIDTH = 16
+
+
+def vertex_table(bm: BaseMesh) -> mi.Float:
+    """The base vertices' slice attributes interleaved for packet gathers: per vertex
+    ``TABLE_WIDTH`` floats (u, v, bn, su, sv, zero padding), (V * 16,) Float.  Every
+    surface-aligned slice's vertices carry these (:func:`aligned_slices`)."""
+    table = np.zeros((len(bm.positions), TABLE_WIDTH), np.float32)
+    table[:, :11] = np.concatenate([bm.uvs, bm.normals, bm.su, bm.sv], 1)
+    return mi.Float(table.ravel())
+
+
 def _check_size(triangles: int, what: str) -> None:
     if triangles > MAX_SLICE_TRIANGLES:
         raise ValueError(f"slicing: {what} would need {triangles:,} slice triangles, more than "

@@ -35,6 +35,7 @@ import numpy as np
 
 from mi_displace.render import zbuffer
 from mi_displace.render.raster import pixel_rays
+from mi_displace.slicing import geometry as geo
 from mi_displace.slicing.sliced import FAMILIES, Hit, SlicedVolume
 from mi_displace.slicing.trace import alpha_test
 
@@ -123,30 +124,42 @@ def _box_counts(view: zbuffer.View, aa: int, mask: mi.Bool, boxes) -> mi.UInt32:
     return dr.select(some, at(x1, y1) - at(x0, y1) - at(x1, y0) + at(x0, y0), 0)
 
 
-def _store(hit: Hit, view, aa, ray, found, keys, clip, geom, slices, prim_of=None) -> Hit:
+def _store(hit: Hit, view, aa, ray, found, keys, clip, geom, attributes) -> Hit:
     """``hit`` with the fragments of ``keys`` where ``found`` (only those samples are
-    resolved): barycentrics of the key's triangle of ``geom`` (clip-space vertices
-    ``clip``) at the sample, the point on the sample's ray, the attributes of face
-    ``prim_of[tri]`` (or ``tri``) of ``slices``."""
+    resolved): the point at the key's depth on the sample's ray, and
+    ``attributes(tri, b1, b2) -> (uv, n, su, sv)`` at the barycentrics of the key's
+    triangle of ``geom`` (clip-space vertices ``clip``) at the sample."""
     index = dr.compress(found)
     if dr.width(index) == 0:
         return hit
-    tri = mi.UInt32(dr.gather(mi.UInt64, keys, index) & 0xFFFFFFFF)
+    key = dr.gather(mi.UInt64, keys, index)
+    tri = mi.UInt32(key & 0xFFFFFFFF)
     X, Y = zbuffer.sample_xy(view, index, aa)
     _, b1, b2, _ = zbuffer.fragment(view, clip, geom, tri, X, Y, True)
-    face = dr.gather(mi.Vector3u, geom.faces, tri)
-    v = [dr.gather(mi.Point3f, geom.positions, face[i]) for i in range(3)]
     o, d = dr.gather(mi.Point3f, ray.o, index), dr.gather(mi.Vector3f, ray.d, index)
-    p = o + dr.dot((1.0 - b1 - b2) * v[0] + b1 * v[1] + b2 * v[2] - o, d) * d
-    prim = tri if prim_of is None else dr.gather(mi.UInt32, prim_of, tri)
-    uv = mi.Point2f(*slices.lerp(slices.uv, 2, slices.corners(prim, True), (b1, b2), True))
-    n, su, sv = slices.frame(prim, (b1, b2), True)
+    local = mi.Transform4f(view.to_local.astype(np.float32))
+    depth = dr.reinterpret_array(mi.Float, mi.UInt32(key >> 32))   # view-local z
+    p = o + (depth - (local @ o).z) / (local @ d).z * d
     fields = []
-    for old, new in zip(hit.fields(), (True, p, uv, n, su, sv)):
-        old = dr.copy(old)
-        dr.scatter(old, type(old)(new), index)
-        fields.append(old)
+    for old, new in zip(hit.fields(), (True, p, *attributes(tri, b1, b2))):
+        # scattered into fresh arrays: a field of ``hit`` may hold width-1 components
+        # (a perspective ray's origin), which a scatter would write past
+        resolved = dr.zeros(type(old), dr.width(found))
+        dr.scatter(resolved, type(old)(new), index)
+        fields.append(dr.select(found, resolved, old))
     return Hit(*fields)
+
+
+def _slice_attributes(slices, prim_of=None):
+    """``attributes`` of :func:`_store` from the vertices of ``slices`` faces
+    ``prim_of[tri]`` (or ``tri``)."""
+    def attributes(tri, b1, b2):
+        prim = tri if prim_of is None else dr.gather(mi.UInt32, prim_of, tri)
+        idx = slices.corners(prim, True)
+        uv = mi.Point2f(*slices.lerp(slices.uv, 2, idx, (b1, b2), True))
+        return (uv, *(mi.Vector3f(*slices.lerp(b, 3, idx, (b1, b2), True))
+                      for b in (slices.bn, slices.su, slices.sv)))
+    return attributes
 
 
 def _corner_uvs(slices, idx: list, active) -> list:
@@ -164,8 +177,7 @@ def _passes(volume: SlicedVolume, uvs: list, b1, b2, h_alpha, active) -> mi.Bool
 
 def _draw_polygons(volume: SlicedVolume, view, aa, slices, mine, start):
     """The slice triangles (not the walls) whose screen box holds a sample of ``mine``,
-    rasterised one by one.  Returns ``(keys, clip, geom, ids)``: ``ids`` maps the keys'
-    triangles to the family's faces."""
+    rasterised one by one.  Returns ``(keys, clip, geom, attributes)`` (:func:`_store`)."""
     full = slices.geometry()
     every = dr.arange(mi.UInt32, dr.width(full.faces))
     boxes = zbuffer.screen_boxes(view, full, zbuffer.to_clip(view, full), every)
@@ -185,15 +197,15 @@ def _draw_polygons(volume: SlicedVolume, view, aa, slices, mine, start):
         return test
 
     keys, clip = zbuffer.rasterise(view, geom, True, aa=aa, alpha=alpha, initial=start)
-    return keys, clip, geom, keep
+    return keys, clip, geom, _slice_attributes(slices, keep)
 
 
 def _draw_aligned(volume: SlicedVolume, view, aa, slices, start):
     """Direction a's slices — the base lifted to h = k / N, slice k's faces k F + f of the
     family's mesh (:func:`mi_displace.slicing.geometry.aligned_slices`) — rasterised as
     layered copies of slice 0 (:func:`mi_displace.render.zbuffer.rasterise_layers`: one
-    prism per base polygon, front to back).  Returns ``(keys, clip, geom, None)``: the keys'
-    triangles are the family's faces."""
+    prism per base polygon, front to back).  Returns ``(keys, clip, geom, attributes)``
+    (:func:`_store`; the attributes read from the base vertices, one packet per corner)."""
     bm, n = volume.bm, volume.counts["a"]
     V, F = len(bm.positions), len(bm.faces)
     full = slices.geometry()
@@ -211,7 +223,16 @@ def _draw_aligned(volume: SlicedVolume, view, aa, slices, start):
         # pre-pass, same keys), they cull the prisms and fragments behind the surface
         start, _ = zbuffer.rasterise(view, base, True, aa=aa, initial=start)
     keys, _ = zbuffer.rasterise_layers(view, base, step, n, aa=aa, alpha=alpha, initial=start)
-    return keys, zbuffer.to_clip(view, full), full, None
+    table = volume.vertex_table   # every slice's vertex v' has base vertex v' mod V's attributes
+
+    def attributes(tri, b1, b2):
+        face = dr.gather(mi.Vector3u, full.faces, tri)
+        w = (1.0 - b1 - b2, b1, b2)
+        a = sum(w[i] * dr.gather(mi.ArrayXf, table, face[i] % V, shape=(geo.TABLE_WIDTH, dr.width(tri)))
+                for i in range(3))
+        return mi.Point2f(a[0], a[1]), *(mi.Vector3f(a[j], a[j + 1], a[j + 2]) for j in (2, 5, 8))
+
+    return keys, zbuffer.to_clip(view, full), full, attributes
 
 
 def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
@@ -226,7 +247,7 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
                          "polygons: they are not rasterised")
     view = zbuffer.view_from_sensor(sensor, aa)
     ray, _, _, _ = pixel_rays(sensor, aa)
-    n = dr.width(ray.d)
+    n = view.width * view.height   # samples (a constant ray component has width 1)
     low = mi.UInt64(0xFFFFFFFF)
     walls = volume.walls_scene
     wgeom = walls.geometry()
@@ -260,7 +281,7 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
         base, bclip = zbuffer.rasterise(view, bgeom, True, aa=aa, alpha=leaving,
                                         initial=dr.select(covered, initial, 0))
         hit = _store(hit, view, aa, ray, covered & (base != zbuffer.EMPTY), base, bclip, bgeom,
-                     walls, bottoms)
+                     _slice_attributes(walls, bottoms))
         initial = base | low
         dr.eval(initial, hit.found, hit.p, hit.uv, hit.n, hit.su, hit.sv)
     for index, fam in enumerate(FAMILIES[volume.direction]):   # a, b, c: three at most
@@ -273,10 +294,10 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
         start = dr.select(mine, initial, 0)
         slices = volume.families[fam][0]
         if fam == "a":   # offset copies of the base: drawn as prisms, front to back
-            keys, clip, geom, ids = _draw_aligned(volume, view, aa, slices, start)
+            keys, clip, geom, attributes = _draw_aligned(volume, view, aa, slices, start)
         else:
-            keys, clip, geom, ids = _draw_polygons(volume, view, aa, slices, mine, start)
-        hit = _store(hit, view, aa, ray, mine & ((keys & low) != low), keys, clip, geom, slices, ids)
+            keys, clip, geom, attributes = _draw_polygons(volume, view, aa, slices, mine, start)
+        hit = _store(hit, view, aa, ray, mine & ((keys & low) != low), keys, clip, geom, attributes)
         dr.eval(hit.found, hit.p, hit.uv, hit.n, hit.su, hit.sv)
     hit.n = dr.normalize(hit.n)
     dr.eval(hit.n)

@@ -101,6 +101,8 @@ class SlicedVolume:
             self.families[fam] = (geo.SliceScene(geo.concat([sm, walls]), f"slices_{fam}"),
                                   4 * self.counts[fam] + 64)
         self.walls_scene = geo.SliceScene(walls, "walls")   # also the proxy's face frames
+        #: direction a's vertex attributes for the rasteriser (mi_displace.slicing.rasterised)
+        self.vertex_table = geo.vertex_table(bm) if "a" in FAMILIES[direction] else None
         #: the slices rasterised for the current raster frame (mi_displace.slicing.rasterised)
         self.frame = None
         if direction == "screen":

@@ -214,3 +214,18 @@ def test_shadows_onto_other_objects(variant, integrator, follows):
     assert 0.2 < shadow.mean() < 0.8                  # bricks and lit mortar both there
     agree = (dark == shadow).mean()
     assert (agree > 0.9) == follows, agree
+
+
+@pytest.mark.parametrize("direction", ["a", "c"])
+def test_orthographic_frame_covers_every_sample(variant, helpers, direction):
+    """An orthographic sensor's rays share one direction (a width-1 array): the frame's
+    buffers still hold one entry per sample (one family without base polygons skips the
+    walls pass, so nothing else sizes them), and match the walk."""
+    sensor = helpers.look([0.3, -2.0, 2.0], [0, 0, 0], res=40, ortho_size=0.9)
+    shape = helpers.plane(slices=12, direction=direction, draw_base=False)
+    img, walked, obj = both(helpers, shape, sensor)
+    frame = rasterised.draw(obj.volume, mi.load_dict(sensor))
+    for buffer in (frame.covered, *frame.hit.fields()):
+        assert np.array(buffer).shape[-1] == 40 * 40
+    assert np.array(frame.hit.found).mean() > 0.2
+    assert_same(img, walked)
