@@ -140,14 +140,13 @@ def _store(hit: Hit, view, aa, ray, found, keys, clip, geom, attributes) -> Hit:
     local = mi.Transform4f(view.to_local.astype(np.float32))
     depth = dr.reinterpret_array(mi.Float, mi.UInt32(key >> 32))   # view-local z
     p = o + (depth - (local @ o).z) / (local @ d).z * d
-    fields = []
-    for old, new in zip(hit.fields(), (True, p, *attributes(tri, b1, b2))):
-        # scattered into fresh arrays: a field of ``hit`` may hold width-1 components
-        # (a perspective ray's origin), which a scatter would write past
-        resolved = dr.zeros(type(old), dr.width(found))
-        dr.scatter(resolved, type(old)(new), index)
-        fields.append(dr.select(found, resolved, old))
-    return Hit(*fields)
+    # scattered into fresh arrays (a field of ``hit`` may hold width-1 components, e.g. a
+    # perspective ray's origin, which a scatter would write past), all in one kernel
+    resolved = [dr.zeros(type(old), dr.width(found)) for old in hit.fields()]
+    for r, new in zip(resolved, (True, p, *attributes(tri, b1, b2))):
+        dr.scatter(r, type(r)(new), index)
+    dr.eval(resolved)
+    return Hit(*(dr.select(found, r, old) for r, old in zip(resolved, hit.fields())))
 
 
 def _slice_attributes(slices, prim_of=None):
@@ -292,6 +291,8 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
         # the nearest key, so the early depth test rejects every fragment before its alpha
         # test (and the hierarchical z skips triangles with no sample of this family)
         start = dr.select(mine, initial, 0)
+        if len(FAMILIES[volume.direction]) == 1 and not volume.opaque_base:
+            start = None   # an empty buffer: no hierarchical z to build
         slices = volume.families[fam][0]
         if fam == "a":   # offset copies of the base: drawn as prisms, front to back
             keys, clip, geom, attributes = _draw_aligned(volume, view, aa, slices, start)
