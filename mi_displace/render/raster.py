@@ -164,24 +164,39 @@ def shade_hit(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f, activ
     """Local illumination of the visible interactions ``si`` (module doc).
 
     ``shadow_test(emitter, si, ds, lit) -> Bool`` says which points see a delta light.
+    Every BSDF query of a sample (``eval`` per delta light, ``eval_diffuse_reflectance``
+    per ambient light) runs in one dispatch over the BSDFs, so a BSDF that prepares its
+    interaction once (the mesostructure BSDFs' ``_prepare``: a slice walk, a VDM
+    footprint) does it once per sample, not once per query.
     """
     hit = active & si.is_valid()
     L = dr.zeros(mi.Color3f, dr.width(ray.d))
     # Directly visible emitters: area lights on the hit, the environment on a miss.
     emitter = si.emitter(scene, active)
     L += dr.select(active, mi.Color3f(emitter.eval(si, active)), 0.0)
-    bsdf = si.bsdf(ray)
     ctx = mi.BSDFContext()
+    lights = []   # (weight, local direction to the light, lit) per delta light
     for e in scene.emitters():
         if _is_delta(e):
             ds, weight = e.sample_direction(si, mi.Point2f(0.5), hit)
             lit = hit & (ds.pdf > 0)
             lit &= shadow_test(e, si, ds, lit)
-            f = bsdf.eval(ctx, si, si.to_local(ds.d), lit)
-            L += dr.select(lit, f * weight, 0.0)
+            lights.append((weight, si.to_local(ds.d), lit))
+    ambient = any(_is_ambient(e) for e in scene.emitters())
+
+    def queries(bsdf, si, wos, lits, hit):
+        f = [bsdf.eval(ctx, si, wo, lit) for wo, lit in zip(wos, lits)]
+        return f, [bsdf.eval_diffuse_reflectance(si, hit)] if ambient else []
+
+    f, albedo = dr.dispatch(si.bsdf(ray), queries, si, [wo for _, wo, _ in lights],
+                            [lit for *_, lit in lights], hit)
+    delta = iter(zip(f, lights))
+    for e in scene.emitters():   # summed in the scene's emitter order
+        if _is_delta(e):
+            value, (weight, _, lit) = next(delta)
+            L += dr.select(lit, value * weight, 0.0)
         elif _is_ambient(e):
-            albedo = bsdf.eval_diffuse_reflectance(si, hit)
-            L += dr.select(hit, albedo * e.eval(si, hit), 0.0)
+            L += dr.select(hit, albedo[0] * e.eval(si, hit), 0.0)
     return L
 
 
