@@ -214,3 +214,26 @@ def test_shadows_onto_other_objects(variant, integrator, follows):
     assert 0.2 < shadow.mean() < 0.8                  # bricks and lit mortar both there
     agree = (dark == shadow).mean()
     assert (agree > 0.9) == follows, agree
+
+
+def test_one_slice_walk_per_shaded_layer(variant, helpers, monkeypatch):
+    """Under ``raster`` the slicing BSDF prepares each layer's interaction once: its alpha
+    test (null transmission) and shading queries (eval per light, the ambient albedo) share
+    one dispatch (raster._shade_fragment), so the walk is traced once per fragment trace
+    (it was traced once per query, and once more for the layer traced again)."""
+    from mi_displace.plugins.slicing import SlicingBSDF
+    from mi_displace.render import raster
+
+    counts = {"walk": 0, "fragment": 0}
+
+    def counted(name, fn):
+        def wrapper(*args, **kwargs):
+            counts[name] += 1
+            return fn(*args, **kwargs)
+        return wrapper
+
+    monkeypatch.setattr(SlicingBSDF, "_walk", counted("walk", SlicingBSDF._walk))
+    monkeypatch.setattr(raster, "_shade_fragment", counted("fragment", raster._shade_fragment))
+    sensor = helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=32)
+    helpers.render({**donut("a"), "bsdf": helpers.MATERIAL}, sensor)
+    assert counts["fragment"] >= 1 and counts["walk"] == counts["fragment"], counts
