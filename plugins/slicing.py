@@ -96,11 +96,12 @@ class SlicingBSDF(MesostructureBSDF):
         si2.p = hit.p
         return (hit, normal), active & ~hit.found, si2
 
-    def _lit(self, state, wo_world):
+    def _lit(self, state, wo_world, active):
         hit, normal = state
         if not self.self_shadows:
             return dr.full(mi.Bool, True, dr.width(wo_world))
-        return ~self.model.occluded(hit, normal, wo_world, hit.found & (dr.dot(normal, wo_world) > 0))
+        return ~self.model.occluded(hit, normal, wo_world,
+                                    active & hit.found & (dr.dot(normal, wo_world) > 0))
 
     def to_string(self):
         return f"{type(self).__name__}[{self.model.stats}]"
