@@ -75,7 +75,8 @@ class SlicingBSDF(MesostructureBSDF):
         # so a later call's mask is always covered); the cache keeps si's variables alive,
         # so their JIT indices cannot be reused by another interaction.  Each vectorised
         # call gets its own copies of si: the walk is shared by queries made in one
-        # dispatch (the raster integrator asks all three so, raster._shade_fragment).
+        # dispatch (the raster integrator's shading asks eval and eval_diffuse_reflectance so,
+        # raster.shade_hit).
         key = (si.t.index, si.p.x.index, si.wi.x.index)
         if self._cache is not None and self._cache[0] == key:
             return self._cache[2]

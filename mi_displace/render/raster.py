@@ -91,58 +91,37 @@ def spawn_ray_to(si: mi.SurfaceInteraction3f, target: mi.Point3f,
     return ray
 
 
-def _layers(scene: mi.Scene, ray: mi.Ray3f, max_layers: int, active: mi.Bool, fragment,
-            value):
-    """The alpha-test loop: trace ``ray`` through up to ``max_layers`` surfaces that pass.
-
-    Alpha test: the hit's BSDF null transmission (channel mean) >= 0.5 lets the ray go on.
-    ``fragment(si, ray, going) -> (null, value)`` runs once per layer (a GPU's fragment
-    shader, that discards or shades): ``null`` is the alpha test's channel mean, ``value``
-    what the caller keeps of the layer where the ray stops (``value`` is its initial
-    value, left on inactive lanes).  The loop keeps each ray's last preliminary
-    intersection, so the interaction of the layer found is built from it (what
-    ``scene.ray_intersect`` of that ray gives, bit for bit), not traced a second time.
-
-    Returns:
-        (si, ray, value): the first opaque (or last) interaction, the ray that found it,
-        and ``fragment``'s value there.
-    """
-
-    def cond(ray, pi, layer, going, value):
-        return going
-
-    def body(ray, pi, layer, going, value):
-        pi = scene.ray_intersect_preliminary(ray, False, going)
-        si = pi.compute_surface_interaction(ray, mi.RayFlags.All, going)
-        null, value = fragment(si, ray, going)
-        passes = going & si.is_valid() & (null >= 0.5) & (layer + 1 < max_layers)
-        ray = dr.select(passes, spawn_ray(si, ray.d, passes), ray)
-        return ray, pi, layer + 1, passes, value
-
-    miss = dr.zeros(mi.PreliminaryIntersection3f, dr.width(ray.d))
-    miss.t = dr.full(mi.Float, dr.inf, dr.width(ray.d))   # lanes never traced (inactive)
-    ray, pi, _, _, value = dr.while_loop(
-        state=(mi.Ray3f(ray), miss, mi.UInt32(0), mi.Bool(active), value),
-        cond=cond, body=body, labels=("ray", "pi", "layer", "going", "value"),
-        label="raster_alpha_test")
-    return pi.compute_surface_interaction(ray, mi.RayFlags.All, active), ray, value
-
-
 def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int,
                      active: mi.Bool) -> tuple[mi.SurfaceInteraction3f, mi.Ray3f]:
-    """Trace ``ray`` through up to ``max_layers`` surfaces that pass the alpha test
-    (:func:`_layers`).
+    """Trace ``ray`` through up to ``max_layers`` surfaces that pass the alpha test.
+
+    Alpha test: the hit's BSDF null transmission (channel mean) >= 0.5 lets the ray go on.
+    The loop keeps each ray's last preliminary intersection, so the interaction returned is
+    built from it (what ``scene.ray_intersect`` of the returned ray gives, bit for bit)
+    instead of tracing that ray a second time.
 
     Returns:
         The first opaque (or last) interaction and the ray that found it.
     """
 
-    def fragment(si, ray, going):
-        null = si.bsdf(ray).eval_null_transmission(si, going & si.is_valid())
-        return dr.mean(null, axis=0), mi.Bool(False)   # no value kept
+    def cond(ray, pi, layer, going):
+        return going
 
-    si, ray, _ = _layers(scene, ray, max_layers, active, fragment, mi.Bool(False))
-    return si, ray
+    def body(ray, pi, layer, going):
+        pi = scene.ray_intersect_preliminary(ray, False, going)
+        si = pi.compute_surface_interaction(ray, mi.RayFlags.All, going)
+        bsdf = si.bsdf(ray)
+        null = dr.mean(bsdf.eval_null_transmission(si, going & si.is_valid()), axis=0)
+        passes = going & si.is_valid() & (null >= 0.5) & (layer + 1 < max_layers)
+        ray = dr.select(passes, spawn_ray(si, ray.d, passes), ray)
+        return ray, pi, layer + 1, passes
+
+    miss = dr.zeros(mi.PreliminaryIntersection3f, dr.width(ray.d))
+    miss.t = dr.full(mi.Float, dr.inf, dr.width(ray.d))   # lanes never traced (inactive)
+    ray, pi, _, _ = dr.while_loop(
+        state=(mi.Ray3f(ray), miss, mi.UInt32(0), mi.Bool(active)),
+        cond=cond, body=body, labels=("ray", "pi", "layer", "going"), label="raster_alpha_test")
+    return pi.compute_surface_interaction(ray, mi.RayFlags.All, active), ray
 
 
 @dataclass
@@ -180,19 +159,15 @@ class Options:
         return self
 
 
-def _shade_fragment(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f,
-                    active: mi.Bool, shadow_test) -> tuple[mi.Color3f, mi.Float]:
-    """Local illumination of the interactions ``si`` (module doc) and the alpha test's null
-    transmission (channel mean) of their BSDFs.
+def shade_hit(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f, active: mi.Bool,
+              shadow_test) -> mi.Color3f:
+    """Local illumination of the visible interactions ``si`` (module doc).
 
     ``shadow_test(emitter, si, ds, lit) -> Bool`` says which points see a delta light.
-    Every BSDF query of a sample (``eval`` per delta light, ``eval_diffuse_reflectance``,
-    ``eval_null_transmission``) runs in one dispatch over the BSDFs, so a BSDF that
-    prepares its interaction once (the mesostructure BSDFs' ``_prepare``: a slice walk, a
-    VDM footprint) does it once per sample and layer, not once per query.
-
-    Returns:
-        (L, null): radiance [scene units] and null transmission in [0, 1] per lane.
+    Every BSDF query of a sample (``eval`` per delta light, ``eval_diffuse_reflectance``
+    per ambient light) runs in one dispatch over the BSDFs, so a BSDF that prepares its
+    interaction once (the mesostructure BSDFs' ``_prepare``: a slice walk, a VDM
+    footprint) does it once per sample, not once per query.
     """
     hit = active & si.is_valid()
     L = dr.zeros(mi.Color3f, dr.width(ray.d))
@@ -212,13 +187,21 @@ def _shade_fragment(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f,
     def queries(bsdf, si, wos, lits, hit):
         if bsdf is None:   # no BSDF exists (a scene without shapes): only the output types
             zero = dr.zeros(mi.Spectrum, dr.width(hit))
-            return [zero] * len(wos), [zero] if ambient else [], zero
-        f = [bsdf.eval(ctx, si, wo, lit) for wo, lit in zip(wos, lits)]
-        albedo = [bsdf.eval_diffuse_reflectance(si, hit)] if ambient else []
-        return f, albedo, bsdf.eval_null_transmission(si, hit)
+            return [zero] * len(wos), [zero] if ambient else []
+        # asked first, in the dispatch's own scope (unread without an ambient light, then
+        # left out of the kernel): a BSDF's cached per-interaction preparation is made
+        # here and shared by the branches below, not made inside one of them
+        albedo = bsdf.eval_diffuse_reflectance(si, hit)
+        # eval under a symbolic if: a SIMD packet with no lit sample skips it, as the
+        # separate vcall masked by ``lit`` did (si from the closure: the same variables)
+        f = [dr.if_stmt((wo, lit), lit,
+                        lambda wo, lit: bsdf.eval(ctx, si, wo, lit),
+                        lambda wo, lit: dr.zeros(mi.Spectrum, dr.width(lit)), label="raster_eval")
+             for wo, lit in zip(wos, lits)]
+        return f, [albedo] if ambient else []
 
-    f, albedo, null = dr.dispatch(si.bsdf(ray), queries, si, [wo for _, wo, _ in lights],
-                                  [lit for *_, lit in lights], hit)
+    f, albedo = dr.dispatch(si.bsdf(ray), queries, si, [wo for _, wo, _ in lights],
+                            [lit for *_, lit in lights], hit)
     delta = iter(zip(f, lights))
     for e in scene.emitters():   # summed in the scene's emitter order
         if _is_delta(e):
@@ -226,30 +209,7 @@ def _shade_fragment(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f,
             L += dr.select(lit, value * weight, 0.0)
         elif _is_ambient(e):
             L += dr.select(hit, albedo[0] * e.eval(si, hit), 0.0)
-    return L, dr.mean(null, axis=0)
-
-
-def shade_hit(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f, active: mi.Bool,
-              shadow_test) -> mi.Color3f:
-    """Local illumination of the visible interactions ``si`` (:func:`_shade_fragment`)."""
-    return _shade_fragment(scene, si, ray, active, shadow_test)[0]
-
-
-def shade_layers(scene: mi.Scene, ray: mi.Ray3f, max_layers: int, active: mi.Bool,
-                 shadow_test) -> mi.Color3f:
-    """Radiance [scene units] along ``ray`` (one Color3f per ray): :func:`first_opaque_hit`'s
-    interaction shaded by :func:`shade_hit`, bit for bit, both in one loop: each layer's
-    fragment is alpha-tested and shaded by one BSDF dispatch and the shading of the layer
-    the ray stops at is kept, so a BSDF that prepares its interaction (a slice walk)
-    does it once per layer.  Layers that pass are shaded too (their shadow rays included)
-    and dropped: a few silhouette samples, against a second walk at every sample."""
-
-    def fragment(si, ray, going):
-        L, null = _shade_fragment(scene, si, ray, going, shadow_test)
-        return null, L
-
-    return _layers(scene, ray, max_layers, active, fragment,
-                   dr.zeros(mi.Color3f, dr.width(ray.d)))[2]
+    return L
 
 
 def ray_shadows(scene: mi.Scene):
@@ -315,7 +275,8 @@ def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8,
           active: mi.Bool = True) -> mi.Color3f:
     """Radiance [scene units] along primary rays: ray-traced visibility and shadows."""
     active = mi.Bool(active)
-    return shade_layers(scene, ray, max_layers, active, ray_shadows(scene))
+    si, ray = first_opaque_hit(scene, ray, max_layers, active)
+    return shade_hit(scene, si, ray, active, ray_shadows(scene))
 
 
 def pixel_rays(sensor: mi.Sensor, aa: int) -> tuple[mi.Ray3f, mi.Color3f, int, int]:
@@ -415,12 +376,11 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
     try:
         for shape in drawn:   # a handful of shapes
             shape.raster_begin(sensor, aa)
-        test = shadow_test_of(scene, geom, options)
         if options.visibility == "raytrace":
-            L = shade_layers(scene, ray, max_layers, active, test)
+            si, ray = first_opaque_hit(scene, ray, max_layers, active)
         else:
-            L = shade_hit(scene, zbuffer_hit(sensor, geom, ray, aa, max_layers), ray, active, test)
-        L *= weight
+            si = zbuffer_hit(sensor, geom, ray, aa, max_layers)
+        L = shade_hit(scene, si, ray, active, shadow_test_of(scene, geom, options)) * weight
         dr.eval(L)
     finally:
         for shape in drawn:

@@ -216,24 +216,30 @@ def test_shadows_onto_other_objects(variant, integrator, follows):
     assert (agree > 0.9) == follows, agree
 
 
-def test_one_slice_walk_per_shaded_layer(variant, helpers, monkeypatch):
-    """Under ``raster`` the slicing BSDF prepares each layer's interaction once: its alpha
-    test (null transmission) and shading queries (eval per light, the ambient albedo) share
-    one dispatch (raster._shade_fragment), so the walk is traced once per fragment trace
-    (it was traced once per query, and once more for the layer traced again)."""
+def test_one_slice_walk_for_the_shading(variant, helpers, monkeypatch):
+    """Under ``raster`` the shading asks the slicing BSDF's queries (eval per light, the
+    ambient albedo) in one dispatch (raster.shade_hit), so the slices are walked once for
+    the shading (they were walked once per query)."""
     from mi_displace.plugins.slicing import SlicingBSDF
     from mi_displace.render import raster
 
-    counts = {"walk": 0, "fragment": 0}
+    counts = {"shading": False, "walks": 0, "shade_hit": 0}
+    walk, shade_hit = SlicingBSDF._walk, raster.shade_hit
 
-    def counted(name, fn):
-        def wrapper(*args, **kwargs):
-            counts[name] += 1
-            return fn(*args, **kwargs)
-        return wrapper
+    def counted_walk(*args):
+        counts["walks"] += counts["shading"]
+        return walk(*args)
 
-    monkeypatch.setattr(SlicingBSDF, "_walk", counted("walk", SlicingBSDF._walk))
-    monkeypatch.setattr(raster, "_shade_fragment", counted("fragment", raster._shade_fragment))
+    def counted_shade_hit(*args):
+        counts["shade_hit"] += 1
+        counts["shading"] = True
+        try:
+            return shade_hit(*args)
+        finally:
+            counts["shading"] = False
+
+    monkeypatch.setattr(SlicingBSDF, "_walk", counted_walk)
+    monkeypatch.setattr(raster, "shade_hit", counted_shade_hit)
     sensor = helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=32)
     helpers.render({**donut("a"), "bsdf": helpers.MATERIAL}, sensor)
-    assert counts["fragment"] >= 1 and counts["walk"] == counts["fragment"], counts
+    assert counts["shade_hit"] == 1 and counts["walks"] == 1, counts
