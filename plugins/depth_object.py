@@ -78,9 +78,9 @@ class DepthObjectBSDF(SlicingBSDF):
         si2.p = p
         return (p, normal), active & ~found, si2
 
-    def _lit(self, state, wo_world):
+    def _lit(self, state, wo_world, active):
         p, normal = state
-        return ~self.model.occluded(p, normal, wo_world, dr.dot(normal, wo_world) > 0)
+        return ~self.model.occluded(p, normal, wo_world, active & (dr.dot(normal, wo_world) > 0))
 
 
 

@@ -64,7 +64,7 @@ class Horizon(MesostructureBSDF):
         normal = frame.meso_normal(grad, self.D * self._world_tile(si, self.used_tile, active))
         return (frame, T), dr.zeros(mi.Bool, dr.width(T.x)), shading_interaction(si, si.uv, normal, frame.a)
 
-    def _lit(self, state, wo_world):
+    def _lit(self, state, wo_world, active):
         frame, T = state
         ct, theta, phi, _ = frame.direction(wo_world)
         return (ct > 0) & (dr.pi / 2 - theta > self.lookup.beta(T, phi))

@@ -65,7 +65,7 @@ class Relief(MesostructureBSDF):
         uv = self.tiled.uv(T)
         return (frame, T, h, D, tile), dr.zeros(mi.Bool, dr.width(T.x)), shading_interaction(si, uv, normal, frame.a)
 
-    def _lit(self, state, wo_world):
+    def _lit(self, state, wo_world, active):
         frame, T, h, D, tile = state
         ct, _, _, step = frame.direction(wo_world)
         if self.shadow_steps == 0 or D == 0:

@@ -73,7 +73,10 @@ class SlicingBSDF(MesostructureBSDF):
         # Mitsuba asks eval, eval_null_transmission and eval_diffuse_reflectance of the same
         # interaction in one kernel: walk the slices once per interaction (all valid lanes,
         # so a later call's mask is always covered); the cache keeps si's variables alive,
-        # so their JIT indices cannot be reused by another interaction.
+        # so their JIT indices cannot be reused by another interaction.  Each vectorised
+        # call gets its own copies of si: the walk is shared by queries made in one
+        # dispatch (the raster integrator's shading asks eval and eval_diffuse_reflectance so,
+        # raster.shade_hit).
         key = (si.t.index, si.p.x.index, si.wi.x.index)
         if self._cache is not None and self._cache[0] == key:
             return self._cache[2]
@@ -94,11 +97,12 @@ class SlicingBSDF(MesostructureBSDF):
         si2.p = hit.p
         return (hit, normal), active & ~hit.found, si2
 
-    def _lit(self, state, wo_world):
+    def _lit(self, state, wo_world, active):
         hit, normal = state
         if not self.self_shadows:
             return dr.full(mi.Bool, True, dr.width(wo_world))
-        return ~self.model.occluded(hit, normal, wo_world, hit.found & (dr.dot(normal, wo_world) > 0))
+        return ~self.model.occluded(hit, normal, wo_world,
+                                    active & hit.found & (dr.dot(normal, wo_world) > 0))
 
     def to_string(self):
         return f"{type(self).__name__}[{self.model.stats}]"

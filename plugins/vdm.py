@@ -133,7 +133,8 @@ class MesostructureBSDF(mi.BSDF):
     Subclasses implement ``_setup(tile_size, meshes)`` (precomputation once the tile size is
     known: at construction when ``tile_size`` is given, else when a ``vdm_mesh`` attaches),
     ``_prepare(si, active) -> (state, blocked, si_shading)`` and
-    ``_lit(state, wo_world) -> mi.Bool``.  ``HAS_SILHOUETTE = False`` techniques never pass
+    ``_lit(state, wo_world, active) -> mi.Bool`` (only the ``active`` lanes' answers are
+    read: a light walk leaves the others out).  ``HAS_SILHOUETTE = False`` techniques never pass
     rays through (no null transmission, no march inside the raster alpha test).
     """
 
@@ -237,8 +238,8 @@ class MesostructureBSDF(mi.BSDF):
             return None, dr.zeros(mi.Bool, dr.width(si.t)), si
         return self._prepare(si, active)
 
-    def _lit_state(self, state, wo_world) -> mi.Bool:
-        return mi.Bool(True) if state is None else self._lit(state, wo_world)
+    def _lit_state(self, state, wo_world, active) -> mi.Bool:
+        return mi.Bool(True) if state is None else self._lit(state, wo_world, active)
 
     # -- to implement --------------------------------------------------------------------
     def _setup(self, tile_size: float, meshes) -> None:
@@ -247,7 +248,7 @@ class MesostructureBSDF(mi.BSDF):
     def _prepare(self, si, active):
         raise NotImplementedError
 
-    def _lit(self, state, wo_world):
+    def _lit(self, state, wo_world, active):
         raise NotImplementedError
 
     def _facing(self, w: mi.Vector3f) -> mi.Bool:
@@ -267,7 +268,7 @@ class MesostructureBSDF(mi.BSDF):
         wo_world = si.to_world(wo)
         ok = active & ~blocked & self._facing(wo)
         f = self.nested.eval(ctx, si2, si2.to_local(wo_world), ok)
-        ok &= self._lit_state(state, wo_world)
+        ok &= self._lit_state(state, wo_world, ok)
         return dr.select(ok, mi.Spectrum(f), 0.0)
 
     @collector_paused
@@ -303,7 +304,8 @@ class MesostructureBSDF(mi.BSDF):
         pdf = dr.select(ok, pdf, 0.0)
         if ctx.mode == mi.TransportMode.Importance:
             return self.eval(ctx, si, wo, active), pdf
-        lit = ok & self._facing(wo) & self._lit_state(state, wo_world)
+        lit = ok & self._facing(wo)
+        lit &= self._lit_state(state, wo_world, lit)
         return dr.select(lit, mi.Spectrum(f), 0.0), pdf
 
     @collector_paused
@@ -314,7 +316,8 @@ class MesostructureBSDF(mi.BSDF):
         bs, weight = self.nested.sample(ctx, si2, sample1, sample2, front)
         wo_world = si2.to_world(bs.wo)
         wo = si.to_local(wo_world)
-        keep = front & self._facing(wo) & self._lit_state(state, wo_world)
+        keep = front & self._facing(wo)
+        keep &= self._lit_state(state, wo_world, keep)
         weight = dr.select(keep, mi.Spectrum(weight), 0.0)
         if ctx.mode == mi.TransportMode.Importance:
             # sampled in the frame seen from wi, weighted by the adjoint value (eval)
@@ -491,8 +494,8 @@ class VDM(MesostructureBSDF):
         fp = self.steps.footprint(si, active)
         return fp, fp.silhouette, self.steps.shading(si, fp)
 
-    def _lit(self, state, wo_world):
-        return self.steps.lit(state, wo_world)
+    def _lit(self, state, wo_world, active):
+        return self.steps.lit(state, wo_world, active)
 
     def _blocked(self, si, active):
         if self._unused():

@@ -96,26 +96,32 @@ def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int,
     """Trace ``ray`` through up to ``max_layers`` surfaces that pass the alpha test.
 
     Alpha test: the hit's BSDF null transmission (channel mean) >= 0.5 lets the ray go on.
+    The loop keeps each ray's last preliminary intersection, so the interaction returned is
+    built from it (what ``scene.ray_intersect`` of the returned ray gives, bit for bit)
+    instead of tracing that ray a second time.
 
     Returns:
         The first opaque (or last) interaction and the ray that found it.
     """
 
-    def cond(ray, layer, going):
+    def cond(ray, pi, layer, going):
         return going
 
-    def body(ray, layer, going):
-        si = scene.ray_intersect(ray, going)
+    def body(ray, pi, layer, going):
+        pi = scene.ray_intersect_preliminary(ray, False, going)
+        si = pi.compute_surface_interaction(ray, mi.RayFlags.All, going)
         bsdf = si.bsdf(ray)
         null = dr.mean(bsdf.eval_null_transmission(si, going & si.is_valid()), axis=0)
         passes = going & si.is_valid() & (null >= 0.5) & (layer + 1 < max_layers)
         ray = dr.select(passes, spawn_ray(si, ray.d, passes), ray)
-        return ray, layer + 1, passes
+        return ray, pi, layer + 1, passes
 
-    ray, _, _ = dr.while_loop(state=(mi.Ray3f(ray), mi.UInt32(0), mi.Bool(active)),
-                              cond=cond, body=body, labels=("ray", "layer", "going"),
-                              label="raster_alpha_test")
-    return scene.ray_intersect(ray, active), ray
+    miss = dr.zeros(mi.PreliminaryIntersection3f, dr.width(ray.d))
+    miss.t = dr.full(mi.Float, dr.inf, dr.width(ray.d))   # lanes never traced (inactive)
+    ray, pi, _, _ = dr.while_loop(
+        state=(mi.Ray3f(ray), miss, mi.UInt32(0), mi.Bool(active)),
+        cond=cond, body=body, labels=("ray", "pi", "layer", "going"), label="raster_alpha_test")
+    return pi.compute_surface_interaction(ray, mi.RayFlags.All, active), ray
 
 
 @dataclass
@@ -158,24 +164,51 @@ def shade_hit(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f, activ
     """Local illumination of the visible interactions ``si`` (module doc).
 
     ``shadow_test(emitter, si, ds, lit) -> Bool`` says which points see a delta light.
+    Every BSDF query of a sample (``eval`` per delta light, ``eval_diffuse_reflectance``
+    per ambient light) runs in one dispatch over the BSDFs, so a BSDF that prepares its
+    interaction once (the mesostructure BSDFs' ``_prepare``: a slice walk, a VDM
+    footprint) does it once per sample, not once per query.
     """
     hit = active & si.is_valid()
     L = dr.zeros(mi.Color3f, dr.width(ray.d))
     # Directly visible emitters: area lights on the hit, the environment on a miss.
     emitter = si.emitter(scene, active)
     L += dr.select(active, mi.Color3f(emitter.eval(si, active)), 0.0)
-    bsdf = si.bsdf(ray)
     ctx = mi.BSDFContext()
+    lights = []   # (weight, local direction to the light, lit) per delta light
     for e in scene.emitters():
         if _is_delta(e):
             ds, weight = e.sample_direction(si, mi.Point2f(0.5), hit)
             lit = hit & (ds.pdf > 0)
             lit &= shadow_test(e, si, ds, lit)
-            f = bsdf.eval(ctx, si, si.to_local(ds.d), lit)
-            L += dr.select(lit, f * weight, 0.0)
+            lights.append((weight, si.to_local(ds.d), lit))
+    ambient = any(_is_ambient(e) for e in scene.emitters())
+
+    def queries(bsdf, si, wos, lits, hit):
+        if bsdf is None:   # no BSDF exists (a scene without shapes): only the output types
+            zero = dr.zeros(mi.Spectrum, dr.width(hit))
+            return [zero] * len(wos), [zero] if ambient else []
+        # asked first, in the dispatch's own scope (unread without an ambient light, then
+        # left out of the kernel): a BSDF's cached per-interaction preparation is made
+        # here and shared by the branches below, not made inside one of them
+        albedo = bsdf.eval_diffuse_reflectance(si, hit)
+        # eval under a symbolic if: a SIMD packet with no lit sample skips it, as the
+        # separate vcall masked by ``lit`` did (si from the closure: the same variables)
+        f = [dr.if_stmt((wo, lit), lit,
+                        lambda wo, lit: bsdf.eval(ctx, si, wo, lit),
+                        lambda wo, lit: dr.zeros(mi.Spectrum, dr.width(lit)), label="raster_eval")
+             for wo, lit in zip(wos, lits)]
+        return f, [albedo] if ambient else []
+
+    f, albedo = dr.dispatch(si.bsdf(ray), queries, si, [wo for _, wo, _ in lights],
+                            [lit for *_, lit in lights], hit)
+    delta = iter(zip(f, lights))
+    for e in scene.emitters():   # summed in the scene's emitter order
+        if _is_delta(e):
+            value, (weight, _, lit) = next(delta)
+            L += dr.select(lit, value * weight, 0.0)
         elif _is_ambient(e):
-            albedo = bsdf.eval_diffuse_reflectance(si, hit)
-            L += dr.select(hit, albedo * e.eval(si, hit), 0.0)
+            L += dr.select(hit, albedo[0] * e.eval(si, hit), 0.0)
     return L
 
 

@@ -187,8 +187,9 @@ class VDMSteps:
                                   label="vdm_refine")
         return dr.select(active & found, s, d)
 
-    def lit(self, fp: Footprint, w: mi.Vector3f) -> mi.Bool:
-        """Step 3: is P' lit from world direction w (ignoring curvature, §3.2)?"""
+    def lit(self, fp: Footprint, w: mi.Vector3f, active: mi.Bool = True) -> mi.Bool:
+        """Step 3: is P' lit from world direction w (ignoring curvature, §3.2)?  The shadow
+        check runs on the ``active`` lanes only (the others' answers are not read)."""
         if not self.shadows or self.depth == 0.0:
             return mi.Bool(True)
         ct, theta, phi, step = fp.frame.direction(w)
@@ -200,6 +201,7 @@ class VDMSteps:
         s_p = fp.h * sec_l               # distance from P'' to P' along the light ray
         blocked = d_l < s_p * (1.0 - self.rel) - self.eps * sec_l
         if self.shadow_verify > 0:
+            blocked &= active
             blocked &= self._occluded(T3, tan_l, sec_l, step * fp.tile, d_l, s_p, blocked)
         return (ct > 0) & ~blocked
 

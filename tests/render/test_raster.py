@@ -120,3 +120,27 @@ def test_grazing_view_and_grazing_light_stay_finite(variant):
     img = render(sc)
     lit = img.sum(2) > 0
     assert 0.05 < lit.mean() < 0.95  # ripple flanks facing the light lit, the rest in shadow
+
+
+def test_found_interaction_is_the_traced_one(variant):
+    """``first_opaque_hit`` builds the interaction it returns from the loop's preliminary
+    intersection: bit for bit what tracing the found ray again gives, with a card that
+    passes (null), one that stops rays, and misses."""
+    from mi_displace.render import raster
+
+    def card(x, y, opacity):
+        return {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate(
+            [x, y, 0.8]).rotate([1, 0, 0], 90).scale(0.3),
+            "bsdf": {"type": "mask", "opacity": {"type": "rgb", "value": opacity},
+                     "bsdf": {"type": "diffuse"}}}
+    # a card in front that passes (opacity 0.2), one behind it, half hidden, that stops rays
+    sc = scene({"type": "raster"}, res=48, extra={"pass": card(0.0, -3.0, 0.2),
+                                                  "stop": card(0.4, -2.0, 0.9)})
+    ray, _, _, _ = raster.pixel_rays(sc.sensors()[0], 1)
+    active = mi.Bool(True)
+    si, found = raster.first_opaque_hit(sc, ray, 8, active)
+    traced = sc.ray_intersect(found, active)
+    for name in ("t", "p", "n", "uv", "dp_du", "dp_dv", "prim_index"):
+        assert np.array_equal(np.array(getattr(si, name)), np.array(getattr(traced, name))), name
+    passed = np.any(np.array(found.o) != np.array(ray.o), axis=0)   # went on past a layer
+    assert 0.05 < passed.mean() < 0.95 and np.array(traced.is_valid()).mean() > 0.2

@@ -229,3 +229,32 @@ def test_orthographic_frame_covers_every_sample(variant, helpers, direction):
         assert np.array(buffer).shape[-1] == 40 * 40
     assert np.array(frame.hit.found).mean() > 0.2
     assert_same(img, walked)
+
+
+def test_one_slice_walk_for_the_shading(variant, helpers, monkeypatch):
+    """Under ``raster`` the shading asks the slicing BSDF's queries (eval per light, the
+    ambient albedo) in one dispatch (raster.shade_hit), so the slices are walked once for
+    the shading (they were walked once per query)."""
+    from mi_displace.plugins.slicing import SlicingBSDF
+    from mi_displace.render import raster
+
+    counts = {"shading": False, "walks": 0, "shade_hit": 0}
+    walk, shade_hit = SlicingBSDF._walk, raster.shade_hit
+
+    def counted_walk(*args):
+        counts["walks"] += counts["shading"]
+        return walk(*args)
+
+    def counted_shade_hit(*args):
+        counts["shade_hit"] += 1
+        counts["shading"] = True
+        try:
+            return shade_hit(*args)
+        finally:
+            counts["shading"] = False
+
+    monkeypatch.setattr(SlicingBSDF, "_walk", counted_walk)
+    monkeypatch.setattr(raster, "shade_hit", counted_shade_hit)
+    sensor = helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=32)
+    helpers.render({**donut("a"), "bsdf": helpers.MATERIAL}, sensor)
+    assert counts["shade_hit"] == 1 and counts["walks"] == 1, counts
