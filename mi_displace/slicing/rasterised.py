@@ -125,10 +125,11 @@ def _box_counts(view: zbuffer.View, aa: int, mask: mi.Bool, boxes) -> mi.UInt32:
 
 
 def _store(hit: Hit, view, aa, ray, found, keys, clip, geom, attributes) -> Hit:
-    """``hit`` with the fragments of ``keys`` where ``found`` (only those samples are
-    resolved): the point at the key's depth on the sample's ray, and
-    ``attributes(tri, b1, b2) -> (uv, n, su, sv)`` at the barycentrics of the key's
-    triangle of ``geom`` (clip-space vertices ``clip``) at the sample."""
+    """``hit`` (full-width arrays, written in place) with the fragments of ``keys`` where
+    ``found`` (only those samples are resolved): the point at the key's depth on the
+    sample's ray, and ``attributes(tri, b1, b2) -> (uv, n, su, sv)`` at the barycentrics
+    of the key's triangle of ``geom`` (clip-space vertices ``clip``) at the sample (n
+    normalised)."""
     index = dr.compress(found)
     if dr.width(index) == 0:
         return hit
@@ -140,13 +141,11 @@ def _store(hit: Hit, view, aa, ray, found, keys, clip, geom, attributes) -> Hit:
     local = mi.Transform4f(view.to_local.astype(np.float32))
     depth = dr.reinterpret_array(mi.Float, mi.UInt32(key >> 32))   # view-local z
     p = o + (depth - (local @ o).z) / (local @ d).z * d
-    # scattered into fresh arrays (a field of ``hit`` may hold width-1 components, e.g. a
-    # perspective ray's origin, which a scatter would write past), all in one kernel
-    resolved = [dr.zeros(type(old), dr.width(found)) for old in hit.fields()]
-    for r, new in zip(resolved, (True, p, *attributes(tri, b1, b2))):
-        dr.scatter(r, type(r)(new), index)
-    dr.eval(resolved)
-    return Hit(*(dr.select(found, r, old) for r, old in zip(resolved, hit.fields())))
+    uv, n, su, sv = attributes(tri, b1, b2)
+    for field, new in zip(hit.fields(), (True, p, uv, dr.normalize(n), su, sv)):
+        dr.scatter(field, type(field)(new), index)
+    dr.eval()   # the scatters, in one kernel
+    return hit
 
 
 def _slice_attributes(slices, prim_of=None):
@@ -260,8 +259,9 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
     else:   # one family, no base: the walls decide nothing (every slice lies inside them)
         covered, choice = dr.full(mi.Bool, True, n), dr.zeros(mi.UInt32, n)
     dr.eval(covered, choice)
-    hit = Hit(dr.zeros(mi.Bool, n), mi.Point3f(ray.o), dr.zeros(mi.Point2f, n),
-              dr.zeros(mi.Vector3f, n), dr.zeros(mi.Vector3f, n), dr.zeros(mi.Vector3f, n))
+    # full width (a constant ray component has width 1, which a scatter would write past)
+    hit = Hit(*(dr.zeros(t, n) for t in (mi.Bool, mi.Point3f, mi.Point2f, mi.Vector3f,
+                                          mi.Vector3f, mi.Vector3f)))
     # the base polygons, when drawn: the bottom wall where the ray leaves through it; drawn
     # first, it hides every slice fragment behind it (early depth test) and stays below
     # every slice fragment in front of it (its key keeps the depth, an id of all ones)
@@ -282,7 +282,7 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
         hit = _store(hit, view, aa, ray, covered & (base != zbuffer.EMPTY), base, bclip, bgeom,
                      _slice_attributes(walls, bottoms))
         initial = base | low
-        dr.eval(initial, hit.found, hit.p, hit.uv, hit.n, hit.su, hit.sv)
+        dr.eval(initial)
     for index, fam in enumerate(FAMILIES[volume.direction]):   # a, b, c: three at most
         mine = covered & (choice == index)
         if not dr.any(mine):
@@ -299,9 +299,6 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
         else:
             keys, clip, geom, attributes = _draw_polygons(volume, view, aa, slices, mine, start)
         hit = _store(hit, view, aa, ray, mine & ((keys & low) != low), keys, clip, geom, attributes)
-        dr.eval(hit.found, hit.p, hit.uv, hit.n, hit.su, hit.sv)
-    hit.n = dr.normalize(hit.n)
-    dr.eval(hit.n)
     eye = None
     if view.perspective:
         eye = np.array(sensor.world_transform() @ mi.ScalarPoint3f(0, 0, 0), np.float64).ravel()
