@@ -39,6 +39,8 @@ from mi_displace.slicing import geometry as geo
 from mi_displace.slicing.sliced import FAMILIES, Hit, SlicedVolume
 from mi_displace.slicing.trace import alpha_test
 
+#: Floats per sample of :attr:`FrameBuffer.packed` (a power of two: one packet gather).
+PACKED = 16
 #: A lane's ray is one of the frame's sample rays when it passes this close to the sample's
 #: ray (relative to 1 + the distance) and points along it within this many grid cells.
 ON_RAY_EPS, ON_SAMPLE_CELLS = 1e-4, 1e-2
@@ -57,6 +59,8 @@ class FrameBuffer:
         hit: per sample, the fragment (:class:`~mi_displace.slicing.sliced.Hit`; ``found``
             False where every fragment was discarded).
         eye: (3,) camera position (perspective) or None (orthographic).
+        packed: per sample, ``PACKED`` floats (found, covered, p, uv, n, su, sv, 0) for the
+            lookup's packet gather, (n * 16,) Float.
     """
 
     view: zbuffer.View
@@ -64,6 +68,16 @@ class FrameBuffer:
     covered: mi.Bool
     hit: Hit
     eye: np.ndarray | None
+    packed: mi.Float = None
+
+    def __post_init__(self):
+        if self.packed is None:
+            h = self.hit
+            columns = [mi.Float(h.found), mi.Float(self.covered), *h.p, *h.uv, *h.n, *h.su, *h.sv]
+            n = dr.width(columns[0])
+            columns += [dr.zeros(mi.Float, n)] * (PACKED - len(columns))
+            self.packed = dr.ravel(mi.ArrayXf([c + dr.zeros(mi.Float, n) for c in columns]))
+            dr.eval(self.packed)
 
     def lookup(self, origin: mi.Point3f, d: mi.Vector3f, active: mi.Bool):
         """The fragment of the frame's sample whose ray ``origin + t d`` (t >= 0) is.
@@ -94,9 +108,10 @@ class FrameBuffer:
         use = mi.Bool(active) & on_ray
         index = zbuffer.sample_index(view, mi.UInt32(dr.maximum(X, 0)), mi.UInt32(dr.maximum(Y, 0)),
                                      self.aa)
-        use &= dr.gather(mi.Bool, self.covered, index, use)
-        h = self.hit
-        hit = Hit(*(dr.gather(type(x), x, index, use) for x in (h.found, h.p, h.uv, h.n, h.su, h.sv)))
+        a = dr.gather(mi.ArrayXf, self.packed, index, use, shape=(PACKED, dr.width(index)))
+        use &= a[1] > 0   # covered
+        hit = Hit(a[0] > 0, mi.Point3f(a[2], a[3], a[4]), mi.Point2f(a[5], a[6]),
+                  *(mi.Vector3f(a[j], a[j + 1], a[j + 2]) for j in (7, 10, 13)))
         use &= ~hit.found | (dr.dot(hit.p - origin, d) >= -ON_RAY_EPS * (1 + dr.norm(hit.p - origin)))
         return use, hit
 
