@@ -56,28 +56,23 @@ class FrameBuffer:
         covered: per sample, whether the frame answers for it: its ray meets the volume's
             walls (Bool; every sample when one family is drawn without the base polygons:
             the walls then decide nothing, as every slice lies inside them).
-        hit: per sample, the fragment (:class:`~mi_displace.slicing.sliced.Hit`; ``found``
-            False where every fragment was discarded).
+        packed: per sample, the fragment: :data:`PACKED` floats (found, p, uv, n, su, sv,
+            0; all 0 where every fragment was discarded), read by one packet gather,
+            (n * 16,) Float; :attr:`hit` unpacks it.
         eye: (3,) camera position (perspective) or None (orthographic).
-        packed: per sample, ``PACKED`` floats (found, covered, p, uv, n, su, sv, 0) for the
-            lookup's packet gather, (n * 16,) Float.
     """
 
     view: zbuffer.View
     aa: int
     covered: mi.Bool
-    hit: Hit
+    packed: mi.Float
     eye: np.ndarray | None
-    packed: mi.Float = None
 
-    def __post_init__(self):
-        if self.packed is None:
-            h = self.hit
-            columns = [mi.Float(h.found), mi.Float(self.covered), *h.p, *h.uv, *h.n, *h.su, *h.sv]
-            n = dr.width(columns[0])
-            columns += [dr.zeros(mi.Float, n)] * (PACKED - len(columns))
-            self.packed = dr.ravel(mi.ArrayXf([c + dr.zeros(mi.Float, n) for c in columns]))
-            dr.eval(self.packed)
+    @property
+    def hit(self) -> Hit:
+        """Every sample's fragment (:class:`~mi_displace.slicing.sliced.Hit`)."""
+        n = dr.width(self.covered)
+        return _unpack(dr.gather(mi.ArrayXf, self.packed, dr.arange(mi.UInt32, n), shape=(PACKED, n)))
 
     def lookup(self, origin: mi.Point3f, d: mi.Vector3f, active: mi.Bool):
         """The fragment of the frame's sample whose ray ``origin + t d`` (t >= 0) is.
@@ -108,12 +103,16 @@ class FrameBuffer:
         use = mi.Bool(active) & on_ray
         index = zbuffer.sample_index(view, mi.UInt32(dr.maximum(X, 0)), mi.UInt32(dr.maximum(Y, 0)),
                                      self.aa)
-        a = dr.gather(mi.ArrayXf, self.packed, index, use, shape=(PACKED, dr.width(index)))
-        use &= a[1] > 0   # covered
-        hit = Hit(a[0] > 0, mi.Point3f(a[2], a[3], a[4]), mi.Point2f(a[5], a[6]),
-                  *(mi.Vector3f(a[j], a[j + 1], a[j + 2]) for j in (7, 10, 13)))
+        use &= dr.gather(mi.Bool, self.covered, index, use)
+        hit = _unpack(dr.gather(mi.ArrayXf, self.packed, index, use, shape=(PACKED, dr.width(index))))
         use &= ~hit.found | (dr.dot(hit.p - origin, d) >= -ON_RAY_EPS * (1 + dr.norm(hit.p - origin)))
         return use, hit
+
+
+def _unpack(a: mi.ArrayXf) -> Hit:
+    """The :class:`Hit` of :data:`PACKED` floats per sample (:attr:`FrameBuffer.packed`)."""
+    return Hit(a[0] > 0, mi.Point3f(a[1], a[2], a[3]), mi.Point2f(a[4], a[5]),
+               *(mi.Vector3f(a[j], a[j + 1], a[j + 2]) for j in (6, 9, 12)))
 
 
 def _box_counts(view: zbuffer.View, aa: int, mask: mi.Bool, boxes) -> mi.UInt32:
@@ -139,15 +138,15 @@ def _box_counts(view: zbuffer.View, aa: int, mask: mi.Bool, boxes) -> mi.UInt32:
     return dr.select(some, at(x1, y1) - at(x0, y1) - at(x1, y0) + at(x0, y0), 0)
 
 
-def _store(hit: Hit, view, aa, ray, found, keys, clip, geom, attributes) -> Hit:
-    """``hit`` (full-width arrays, written in place) with the fragments of ``keys`` where
+def _store(packed: mi.Float, view, aa, ray, found, keys, clip, geom, attributes) -> None:
+    """Write into ``packed`` (:attr:`FrameBuffer.packed`) the fragments of ``keys`` where
     ``found`` (only those samples are resolved): the point at the key's depth on the
     sample's ray, and ``attributes(tri, b1, b2) -> (uv, n, su, sv)`` at the barycentrics
     of the key's triangle of ``geom`` (clip-space vertices ``clip``) at the sample (n
-    normalised)."""
+    normalised); one packet scatter per sample."""
     index = dr.compress(found)
     if dr.width(index) == 0:
-        return hit
+        return
     key = dr.gather(mi.UInt64, keys, index)
     tri = mi.UInt32(key & 0xFFFFFFFF)
     X, Y = zbuffer.sample_xy(view, index, aa)
@@ -157,10 +156,10 @@ def _store(hit: Hit, view, aa, ray, found, keys, clip, geom, attributes) -> Hit:
     depth = dr.reinterpret_array(mi.Float, mi.UInt32(key >> 32))   # view-local z
     p = o + (depth - (local @ o).z) / (local @ d).z * d
     uv, n, su, sv = attributes(tri, b1, b2)
-    for field, new in zip(hit.fields(), (True, p, uv, dr.normalize(n), su, sv)):
-        dr.scatter(field, type(field)(new), index)
-    dr.eval()   # the scatters, in one kernel
-    return hit
+    columns = [dr.full(mi.Float, 1.0, dr.width(index)), *p, *uv, *dr.normalize(n), *su, *sv]
+    columns += [dr.zeros(mi.Float, dr.width(index))] * (PACKED - len(columns))
+    dr.scatter(packed, mi.ArrayXf(columns), index)
+    dr.eval(packed)
 
 
 def _slice_attributes(slices, prim_of=None):
@@ -274,9 +273,7 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
     else:   # one family, no base: the walls decide nothing (every slice lies inside them)
         covered, choice = dr.full(mi.Bool, True, n), dr.zeros(mi.UInt32, n)
     dr.eval(covered, choice)
-    # full width (a constant ray component has width 1, which a scatter would write past)
-    hit = Hit(*(dr.zeros(t, n) for t in (mi.Bool, mi.Point3f, mi.Point2f, mi.Vector3f,
-                                          mi.Vector3f, mi.Vector3f)))
+    packed = dr.zeros(mi.Float, PACKED * n)
     # the base polygons, when drawn: the bottom wall where the ray leaves through it; drawn
     # first, it hides every slice fragment behind it (early depth test) and stays below
     # every slice fragment in front of it (its key keeps the depth, an id of all ones)
@@ -294,8 +291,8 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
         # samples whose ray misses the volume start at the nearest key: nothing drawn there
         base, bclip = zbuffer.rasterise(view, bgeom, True, aa=aa, alpha=leaving,
                                         initial=dr.select(covered, initial, 0))
-        hit = _store(hit, view, aa, ray, covered & (base != zbuffer.EMPTY), base, bclip, bgeom,
-                     _slice_attributes(walls, bottoms))
+        _store(packed, view, aa, ray, covered & (base != zbuffer.EMPTY), base, bclip, bgeom,
+               _slice_attributes(walls, bottoms))
         initial = base | low
         dr.eval(initial)
     for index, fam in enumerate(FAMILIES[volume.direction]):   # a, b, c: three at most
@@ -313,8 +310,8 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
             keys, clip, geom, attributes = _draw_aligned(volume, view, aa, slices, start)
         else:
             keys, clip, geom, attributes = _draw_polygons(volume, view, aa, slices, mine, start)
-        hit = _store(hit, view, aa, ray, mine & ((keys & low) != low), keys, clip, geom, attributes)
+        _store(packed, view, aa, ray, mine & ((keys & low) != low), keys, clip, geom, attributes)
     eye = None
     if view.perspective:
         eye = np.array(sensor.world_transform() @ mi.ScalarPoint3f(0, 0, 0), np.float64).ravel()
-    return FrameBuffer(view, aa, covered, hit, eye)
+    return FrameBuffer(view, aa, covered, packed, eye)
