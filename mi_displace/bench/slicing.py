@@ -1,6 +1,8 @@
 """``mi-displace bench slicing [--json]``: displacement by slicing and depth objects.
 
-All in one process (times are wall seconds; medians of 3 warm runs after a cold one):
+All in one process (times are wall seconds; medians of 3 warm runs after a cold one; the
+like-for-like pair ``llvmpipe_s`` / ``render_time_same_work_s``: medians of 5 after two
+warm-up frames each, as the first frames after loading still allocate):
 
 * ``render_time_warm_s``: the bricked donut (scenes/slicing_donut.xml) at 512^2, 25 slices,
   best direction, under ``raster`` with one sample per pixel (as a GPU draws it: the slice
@@ -52,8 +54,9 @@ SCENES = Path(__file__).resolve().parents[2] / "scenes"
 RES = 512
 
 
-def _timed(fn, repeats=3):
-    fn()
+def _timed(fn, repeats=3, warm=1):
+    for _ in range(warm):
+        fn()
     times = []
     for _ in range(repeats):
         dr.sync_thread()
@@ -93,7 +96,7 @@ def donut_gl(scene, slices_list=(25, 64, 150)) -> dict:
     for n in slices_list:
         gl = opengl.GLSlices(geo.aligned_slices(volume.bm, volume.scale, n), D, mvp, RES, RES,
                              light=(0.8, -0.45, 0.4))
-        t, _ = _timed(gl.frame, 5)
+        t, _ = _timed(gl.frame, 5, warm=2)
         covered = float((np.abs(gl.image() - np.array([0.12, 0.13, 0.15])).max(-1) > 0.02).mean())
         gl.release()
         out["llvmpipe_s" if n == 25 else f"llvmpipe_{n}_s"] = t
@@ -143,7 +146,7 @@ def main(json: bool = False) -> int:
                      draw_base="false")
     next(s for s in scene.shapes() if hasattr(s, "volume")).bsdf_ref.self_shadows = False
     unshadowed = mi.load_dict({"type": "raster", "aa": 1, "shadows": "none"})
-    r["render_time_same_work_s"], _ = _timed(lambda: _render(scene, unshadowed))
+    r["render_time_same_work_s"], _ = _timed(lambda: _render(scene, unshadowed), 5, warm=2)
     del scene
     scene, _ = _load(donut, mode="approximation", integrator="raster", res=RES, slices="auto")
     r["auto_slices"] = next(s for s in scene.shapes() if hasattr(s, "volume")).build_stats["slices"]
