@@ -1,8 +1,10 @@
 """``mi-displace bench slicing [--json]``: displacement by slicing and depth objects.
 
-All in one process (times are wall seconds; medians of 3 warm runs after a cold one; the
-like-for-like pair ``llvmpipe_s`` / ``render_time_same_work_s``: medians of 5 after two
-warm-up frames each, as the first frames after loading still allocate):
+All in one process (times are wall seconds; medians of 3 warm runs after a cold one,
+Python's garbage collected before and paused during the timed runs; the like-for-like
+pair ``llvmpipe_s`` / ``render_time_same_work_s``: measured first, before any other
+scene is drawn, as medians of 9 frames drawn alternately, one of each in turn, after two
+warm-up frames each):
 
 * ``render_time_warm_s``: the bricked donut (scenes/slicing_donut.xml) at 512^2, 25 slices,
   best direction, under ``raster`` with one sample per pixel (as a GPU draws it: the slice
@@ -16,7 +18,9 @@ warm-up frames each, as the first frames after loading still allocate):
   a, 25 slices, no base polygons (``draw_base=false``: under the basic α-test slice 0
   passes everywhere, so the image is the same), no self-shadow walk
   (``self_shadows=false``), no shadow ray (``shadows="none"``), one sample per pixel;
-  ``speedup_vs_llvmpipe_same_work``.  The peer shades with the interpolated base normal
+  ``speedup_vs_llvmpipe_same_work``; ``render_time_same_work_later_s``: the same frame
+  timed again at the end, after every other scene of the benchmark was drawn (the kernels
+  and buffers they left make it slower: see docs/slicing.md);  The peer shades with the interpolated base normal
   from a 1024^2 height texture; we still shade with the displaced normal of the
   procedural height (a few lookups per pixel);
   ``auto_slices``: what ``slices="auto"`` chooses for this view;
@@ -40,6 +44,7 @@ warm-up frames each, as the first frames after loading still allocate):
 """
 from __future__ import annotations
 
+import gc
 import json as _json
 import os
 import statistics
@@ -55,14 +60,22 @@ RES = 512
 
 
 def _timed(fn, repeats=3, warm=1):
+    """Median wall seconds of ``repeats`` calls after ``warm`` ones, with Python's garbage
+    collected before and paused during the timed calls (as ``timeit`` does: the previous
+    scenes' garbage is not charged to this frame), and the last result."""
     for _ in range(warm):
         fn()
-    times = []
-    for _ in range(repeats):
-        dr.sync_thread()
-        start = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - start)
+    gc.collect()
+    gc.disable()
+    try:
+        times = []
+        for _ in range(repeats):
+            dr.sync_thread()
+            start = time.perf_counter()
+            out = fn()
+            times.append(time.perf_counter() - start)
+    finally:
+        gc.enable()
     return statistics.median(times), out
 
 
@@ -78,8 +91,31 @@ def _load(path, **params):
     return scene, time.perf_counter() - start
 
 
-def donut_gl(scene, slices_list=(25, 64, 150)) -> dict:
-    """llvmpipe frame times of the donut's surface-aligned slices (see module doc)."""
+def _interleaved(first, second, repeats=9, warm=2):
+    """Median wall seconds of ``first`` and ``second`` called alternately (``warm`` calls
+    each first; garbage collected before and paused during the timed calls): both
+    measured at the same moments of a shared machine."""
+    for _ in range(warm):
+        first(), second()
+    gc.collect()
+    gc.disable()
+    try:
+        times = ([], [])
+        for _ in range(repeats):
+            for fn, out in zip((first, second), times):
+                dr.sync_thread()
+                start = time.perf_counter()
+                fn()
+                out.append(time.perf_counter() - start)
+    finally:
+        gc.enable()
+    return statistics.median(times[0]), statistics.median(times[1])
+
+
+def donut_gl(scene, slices_list=(25, 64, 150), ours=None) -> dict:
+    """llvmpipe frame times of the donut's surface-aligned slices (see module doc); with
+    ``ours`` (a callable drawing our same-work frame) the 25-slice frame is timed
+    alternately with it (``render_time_same_work_s``)."""
     from mi_displace.slicing import geometry as geo
     from mi_displace.slicing import opengl
 
@@ -96,7 +132,10 @@ def donut_gl(scene, slices_list=(25, 64, 150)) -> dict:
     for n in slices_list:
         gl = opengl.GLSlices(geo.aligned_slices(volume.bm, volume.scale, n), D, mvp, RES, RES,
                              light=(0.8, -0.45, 0.4))
-        t, _ = _timed(gl.frame, 5, warm=2)
+        if n == 25 and ours is not None:   # like for like: alternate frames
+            t, out["render_time_same_work_s"] = _interleaved(gl.frame, ours)
+        else:
+            t, _ = _timed(gl.frame, 5, warm=2)
         covered = float((np.abs(gl.image() - np.array([0.12, 0.13, 0.15])).max(-1) > 0.02).mean())
         gl.release()
         out["llvmpipe_s" if n == 25 else f"llvmpipe_{n}_s"] = t
@@ -118,6 +157,18 @@ def main(json: bool = False) -> int:
     donut = SCENES / "slicing_donut.xml"
     r: dict = {"variant": mi.variant(), "resolution": RES, "slices": 25, "direction": "best"}
 
+    # like for like, first (a process that has drawn nothing else yet, as llvmpipe's
+    # fresh context): our same-work frame alternating with llvmpipe's
+    scene, _ = _load(donut, mode="approximation", integrator="raster", res=RES, direction="a",
+                     draw_base="false")
+    next(s for s in scene.shapes() if hasattr(s, "volume")).bsdf_ref.self_shadows = False
+    unshadowed = mi.load_dict({"type": "raster", "aa": 1, "shadows": "none"})
+    same_work = lambda: _render(scene, unshadowed)
+    r.update(donut_gl(scene, ours=same_work))
+    if "render_time_same_work_s" not in r:   # no llvmpipe here: timed alone
+        r["render_time_same_work_s"], _ = _timed(same_work, 5, warm=2)
+    del scene
+
     # the sliced donut: build (warm) and render (warm)
     _load(donut, mode="approximation", integrator="raster", res=RES)
     scene, build = _load(donut, mode="approximation", integrator="raster", res=RES)
@@ -137,16 +188,9 @@ def main(json: bool = False) -> int:
     walls = volume.walls.nbytes()
     r["slices_bytes_direction_a"] = geo.aligned_slices(volume.bm, volume.scale, 25).nbytes() + walls
     r["slices_bytes_screen"] = walls
-    r.update(donut_gl(scene))
     del scene
     scene, _ = _load(donut, mode="approximation", integrator="raster", res=RES, direction="a")
     r["render_time_a_warm_s"], _ = _timed(lambda: _render(scene, raster))
-    del scene
-    scene, _ = _load(donut, mode="approximation", integrator="raster", res=RES, direction="a",
-                     draw_base="false")
-    next(s for s in scene.shapes() if hasattr(s, "volume")).bsdf_ref.self_shadows = False
-    unshadowed = mi.load_dict({"type": "raster", "aa": 1, "shadows": "none"})
-    r["render_time_same_work_s"], _ = _timed(lambda: _render(scene, unshadowed), 5, warm=2)
     del scene
     scene, _ = _load(donut, mode="approximation", integrator="raster", res=RES, slices="auto")
     r["auto_slices"] = next(s for s in scene.shapes() if hasattr(s, "volume")).build_stats["slices"]
@@ -180,6 +224,12 @@ def main(json: bool = False) -> int:
     obj = next(s for s in scene.shapes() if hasattr(s, "depth_object")).depth_object
     obj.skip_empty = False
     r["depth_object_time_noskip_warm_s"], _ = _timed(lambda: _render(scene, raster))
+    del scene
+    # the same-work frame again, at the end of a process that has drawn every scene above
+    scene, _ = _load(donut, mode="approximation", integrator="raster", res=RES, direction="a",
+                     draw_base="false")
+    next(s for s in scene.shapes() if hasattr(s, "volume")).bsdf_ref.self_shadows = False
+    r["render_time_same_work_later_s"], _ = _timed(lambda: _render(scene, unshadowed), 5, warm=2)
     del scene
     if r.get("llvmpipe_s"):
         r["speedup_vs_llvmpipe"] = r["llvmpipe_s"] / r["render_time_warm_s"]
