@@ -116,8 +116,9 @@ def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int,
         ray = dr.select(passes, spawn_ray(si, ray.d, passes), ray)
         return ray, pi, layer + 1, passes
 
-    miss = dr.zeros(mi.PreliminaryIntersection3f, dr.width(ray.d))
-    miss.t = dr.full(mi.Float, dr.inf, dr.width(ray.d))   # lanes never traced (inactive)
+    n = dr.width(ray)   # a ray component may be width 1 (a camera's origin or direction)
+    miss = dr.zeros(mi.PreliminaryIntersection3f, n)
+    miss.t = dr.full(mi.Float, dr.inf, n)   # lanes never traced (inactive)
     ray, pi, _, _ = dr.while_loop(
         state=(mi.Ray3f(ray), miss, mi.UInt32(0), mi.Bool(active)),
         cond=cond, body=body, labels=("ray", "pi", "layer", "going"), label="raster_alpha_test")
@@ -170,7 +171,7 @@ def shade_hit(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f, activ
     footprint) does it once per sample, not once per query.
     """
     hit = active & si.is_valid()
-    L = dr.zeros(mi.Color3f, dr.width(ray.d))
+    L = dr.zeros(mi.Color3f, dr.width(ray))
     # Directly visible emitters: area lights on the hit, the environment on a miss.
     emitter = si.emitter(scene, active)
     L += dr.select(active, mi.Color3f(emitter.eval(si, active)), 0.0)
@@ -308,7 +309,7 @@ def zbuffer_hit(sensor: mi.Sensor, geom: zbuffer.Geometry, ray: mi.Ray3f, aa: in
     """
     view = zbuffer.view_from_sensor(sensor, aa)
     if dr.width(geom.faces) == 0:   # nothing to draw: every sample misses
-        si = dr.zeros(mi.SurfaceInteraction3f, dr.width(ray.d))
+        si = dr.zeros(mi.SurfaceInteraction3f, dr.width(ray))
         si.t, si.wi, si.wavelengths = dr.inf, -ray.d, ray.wavelengths
         return si
     keys, clip = zbuffer.rasterise(view, geom, True, aa=aa)
