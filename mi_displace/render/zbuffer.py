@@ -721,15 +721,24 @@ def rasterise_layers(view: View, geom: Geometry, step: mi.Vector3f, layers: int,
         down = (dz[0] + dz[1] + dz[2]) < 0
         test = None if alpha is None else alpha(f, mi.Bool(True))
 
+        z_near = _z_range(hull)[0]
+
         def sample(X):
-            q = mi.Vector3f(mi.Float(X) + 0.5, mi.Float(Y) + 0.5, 1.0)
-            coef = [[dr.dot(v, q) for v in edge] for edge in E]
             index = sample_index(view, X, Y, aa)
             # early depth read (the buffer as at launch), kept as (depth, id) in 32 bits
             stored = dr.gather(mi.UInt64, keys, index)
             best_z = dr.select(stored == EMPTY, dr.inf,
                                dr.reinterpret_array(mi.Float, mi.UInt32(stored >> 32)))
             best_t = mi.UInt32(stored & 0xFFFFFFFF)
+            # a prism whose nearest point lies behind the stored fragment draws nothing
+            # here: the sample's setup is skipped (by a SIMD packet whose lanes all skip it)
+            dr.if_stmt((X, index, best_z, best_t), z_near <= best_z, draw,
+                       lambda *_: (), label="raster_layer_sample")
+            return (X + 1,)
+
+        def draw(X, index, best_z, best_t):
+            q = mi.Vector3f(mi.Float(X) + 0.5, mi.Float(Y) + 0.5, 1.0)
+            coef = [[dr.dot(v, q) for v in edge] for edge in E]
             lo, hi = _layer_range(coef, top)
 
             def layer(kf):   # (inside, b1, b2, z) of copy kf; z: its plane's, even outside
@@ -764,7 +773,7 @@ def rasterise_layers(view: View, geom: Geometry, step: mi.Vector3f, layers: int,
                 label="raster_layers")
             dr.scatter_reduce(dr.ReduceOp.Min, keys, _key(best_z, best_t), index, won,
                               mode=dr.ReduceMode.Direct)
-            return (X + 1,)
+            return ()
 
         dr.while_loop((mi.UInt32(xs),), lambda X: X < mi.UInt32(xe), sample, label="raster_layer_rows")
         dr.eval(keys)
