@@ -56,15 +56,17 @@ class FrameBuffer:
         covered: per sample, whether the frame answers for it: its ray meets the volume's
             walls (Bool; every sample when one family is drawn without the base polygons:
             the walls then decide nothing, as every slice lies inside them).
-        packed: per sample, the fragment: :data:`PACKED` floats (found, p, uv, n, su, sv,
-            0; all 0 where every fragment was discarded), read by one packet gather,
-            (n * 16,) Float; :attr:`hit` unpacks it.
+        found: per sample, whether a fragment passed (Bool).
+        packed: per sample, the fragment: :data:`PACKED` floats (1, p, uv, n, su, sv, 0;
+            undefined where ``found`` is not set), read by one packet gather, (n * 16,)
+            Float; :attr:`hit` unpacks it.
         eye: (3,) camera position (perspective) or None (orthographic).
     """
 
     view: zbuffer.View
     aa: int
     covered: mi.Bool
+    found: mi.Bool
     packed: mi.Float
     eye: np.ndarray | None
 
@@ -72,7 +74,8 @@ class FrameBuffer:
     def hit(self) -> Hit:
         """Every sample's fragment (:class:`~mi_displace.slicing.sliced.Hit`)."""
         n = dr.width(self.covered)
-        return _unpack(dr.gather(mi.ArrayXf, self.packed, dr.arange(mi.UInt32, n), shape=(PACKED, n)))
+        return _unpack(dr.gather(mi.ArrayXf, self.packed, dr.arange(mi.UInt32, n), self.found,
+                                 shape=(PACKED, n)))
 
     def lookup(self, origin: mi.Point3f, d: mi.Vector3f, active: mi.Bool):
         """The fragment of the frame's sample whose ray ``origin + t d`` (t >= 0) is.
@@ -104,7 +107,8 @@ class FrameBuffer:
         index = zbuffer.sample_index(view, mi.UInt32(dr.maximum(X, 0)), mi.UInt32(dr.maximum(Y, 0)),
                                      self.aa)
         use &= dr.gather(mi.Bool, self.covered, index, use)
-        hit = _unpack(dr.gather(mi.ArrayXf, self.packed, index, use, shape=(PACKED, dr.width(index))))
+        found = dr.gather(mi.Bool, self.found, index, use)
+        hit = _unpack(dr.gather(mi.ArrayXf, self.packed, index, found, shape=(PACKED, dr.width(index))))
         use &= ~hit.found | (dr.dot(hit.p - origin, d) >= -ON_RAY_EPS * (1 + dr.norm(hit.p - origin)))
         return use, hit
 
@@ -138,15 +142,16 @@ def _box_counts(view: zbuffer.View, aa: int, mask: mi.Bool, boxes) -> mi.UInt32:
     return dr.select(some, at(x1, y1) - at(x0, y1) - at(x1, y0) + at(x0, y0), 0)
 
 
-def _store(packed: mi.Float, view, aa, ray, found, keys, clip, geom, attributes) -> None:
-    """Write into ``packed`` (:attr:`FrameBuffer.packed`) the fragments of ``keys`` where
-    ``found`` (only those samples are resolved): the point at the key's depth on the
-    sample's ray, and ``attributes(tri, b1, b2) -> (uv, n, su, sv)`` at the barycentrics
+def _store(frame: FrameBuffer, ray, found, keys, clip, geom, attributes) -> None:
+    """Write into ``frame`` (:attr:`FrameBuffer.packed`, :attr:`FrameBuffer.found`) the
+    fragments of ``keys`` where ``found`` (only those samples are resolved): the point at
+    the key's depth on the sample's ray, and ``attributes(tri, b1, b2) -> (uv, n, su, sv)`` at the barycentrics
     of the key's triangle of ``geom`` (clip-space vertices ``clip``) at the sample (n
     normalised); one packet scatter per sample."""
     index = dr.compress(found)
     if dr.width(index) == 0:
         return
+    view, aa = frame.view, frame.aa
     key = dr.gather(mi.UInt64, keys, index)
     tri = mi.UInt32(key & 0xFFFFFFFF)
     X, Y = zbuffer.sample_xy(view, index, aa)
@@ -158,8 +163,9 @@ def _store(packed: mi.Float, view, aa, ray, found, keys, clip, geom, attributes)
     uv, n, su, sv = attributes(tri, b1, b2)
     columns = [dr.full(mi.Float, 1.0, dr.width(index)), *p, *uv, *dr.normalize(n), *su, *sv]
     columns += [dr.zeros(mi.Float, dr.width(index))] * (PACKED - len(columns))
-    dr.scatter(packed, mi.ArrayXf(columns), index)
-    dr.eval(packed)
+    dr.scatter(frame.packed, mi.ArrayXf(columns), index)
+    dr.scatter(frame.found, True, index)
+    dr.eval(frame.packed, frame.found)
 
 
 def _slice_attributes(slices, prim_of=None):
@@ -273,7 +279,10 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
     else:   # one family, no base: the walls decide nothing (every slice lies inside them)
         covered, choice = dr.full(mi.Bool, True, n), dr.zeros(mi.UInt32, n)
     dr.eval(covered, choice)
-    packed = dr.zeros(mi.Float, PACKED * n)
+    eye = None
+    if view.perspective:
+        eye = np.array(sensor.world_transform() @ mi.ScalarPoint3f(0, 0, 0), np.float64).ravel()
+    frame = FrameBuffer(view, aa, covered, dr.zeros(mi.Bool, n), dr.empty(mi.Float, PACKED * n), eye)
     # the base polygons, when drawn: the bottom wall where the ray leaves through it; drawn
     # first, it hides every slice fragment behind it (early depth test) and stays below
     # every slice fragment in front of it (its key keeps the depth, an id of all ones)
@@ -291,7 +300,7 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
         # samples whose ray misses the volume start at the nearest key: nothing drawn there
         base, bclip = zbuffer.rasterise(view, bgeom, True, aa=aa, alpha=leaving,
                                         initial=dr.select(covered, initial, 0))
-        _store(packed, view, aa, ray, covered & (base != zbuffer.EMPTY), base, bclip, bgeom,
+        _store(frame, ray, covered & (base != zbuffer.EMPTY), base, bclip, bgeom,
                _slice_attributes(walls, bottoms))
         initial = base | low
         dr.eval(initial)
@@ -310,8 +319,5 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
             keys, clip, geom, attributes = _draw_aligned(volume, view, aa, slices, start)
         else:
             keys, clip, geom, attributes = _draw_polygons(volume, view, aa, slices, mine, start)
-        _store(packed, view, aa, ray, mine & ((keys & low) != low), keys, clip, geom, attributes)
-    eye = None
-    if view.perspective:
-        eye = np.array(sensor.world_transform() @ mi.ScalarPoint3f(0, 0, 0), np.float64).ravel()
-    return FrameBuffer(view, aa, covered, packed, eye)
+        _store(frame, ray, mine & ((keys & low) != low), keys, clip, geom, attributes)
+    return frame
