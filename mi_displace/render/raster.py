@@ -96,33 +96,32 @@ def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int,
     """Trace ``ray`` through up to ``max_layers`` surfaces that pass the alpha test.
 
     Alpha test: the hit's BSDF null transmission (channel mean) >= 0.5 lets the ray go on.
-    The loop keeps each ray's last preliminary intersection, so the interaction returned is
-    built from it (what ``scene.ray_intersect`` of the returned ray gives, bit for bit)
-    instead of tracing that ray a second time.
+    The loop keeps each ray's last interaction, so the interaction returned is the one the
+    alpha test saw (what ``scene.ray_intersect`` of the returned ray gives, bit for bit),
+    not built a second time.
 
     Returns:
         The first opaque (or last) interaction and the ray that found it.
     """
 
-    def cond(ray, pi, layer, going):
+    def cond(ray, si, layer, going):
         return going
 
-    def body(ray, pi, layer, going):
-        pi = scene.ray_intersect_preliminary(ray, False, going)
-        si = pi.compute_surface_interaction(ray, mi.RayFlags.All, going)
+    def body(ray, si, layer, going):
+        si = scene.ray_intersect(ray, mi.RayFlags.All, False, going)
         bsdf = si.bsdf(ray)
         null = dr.mean(bsdf.eval_null_transmission(si, going & si.is_valid()), axis=0)
         passes = going & si.is_valid() & (null >= 0.5) & (layer + 1 < max_layers)
         ray = dr.select(passes, spawn_ray(si, ray.d, passes), ray)
-        return ray, pi, layer + 1, passes
+        return ray, si, layer + 1, passes
 
     n = dr.width(ray)   # a ray component may be width 1 (a camera's origin or direction)
-    miss = dr.zeros(mi.PreliminaryIntersection3f, n)
+    miss = dr.zeros(mi.SurfaceInteraction3f, n)
     miss.t = dr.full(mi.Float, dr.inf, n)   # lanes never traced (inactive)
-    ray, pi, _, _ = dr.while_loop(
+    ray, si, _, _ = dr.while_loop(
         state=(mi.Ray3f(ray), miss, mi.UInt32(0), mi.Bool(active)),
-        cond=cond, body=body, labels=("ray", "pi", "layer", "going"), label="raster_alpha_test")
-    return pi.compute_surface_interaction(ray, mi.RayFlags.All, active), ray
+        cond=cond, body=body, labels=("ray", "si", "layer", "going"), label="raster_alpha_test")
+    return si, ray
 
 
 @dataclass
