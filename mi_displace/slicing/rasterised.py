@@ -265,6 +265,7 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
                          "polygons: they are not rasterised")
     view = zbuffer.view_from_sensor(sensor, aa)
     ray, _, _, _ = pixel_rays(sensor, aa)
+    dr.eval(ray.o, ray.d)   # one kernel (gathered from, each component would be its own)
     n = view.width * view.height   # samples (a constant ray component has width 1)
     low = mi.UInt64(0xFFFFFFFF)
     walls = volume.walls_scene
