@@ -676,7 +676,9 @@ def rasterise_layers(view: View, geom: Geometry, step: mi.Vector3f, layers: int,
     copies are visited from the end of the stack nearer the viewer; the alpha test (a
     discard) runs only for a fragment in front of the thread's best so far, and one atomic
     minimum per sample writes that best: exact whatever the order, and front to back it
-    tests about one fragment per prism and sample instead of one per copy.
+    tests about one fragment per prism and sample instead of one per copy.  A sample whose
+    stored fragment lies in front of the prism's nearest vertex skips the prism before
+    any setup (a third of the donut's sample-prism pairs behind its depth pre-pass).
 
     Args:
         step: per-vertex offset between consecutive copies, (V,) Vector3f [world units].
@@ -721,7 +723,10 @@ def rasterise_layers(view: View, geom: Geometry, step: mi.Vector3f, layers: int,
         down = (dz[0] + dz[1] + dz[2]) < 0
         test = None if alpha is None else alpha(f, mi.Bool(True))
 
+        # the prism's nearest vertex depth, less a margin for the rounding of a fragment's
+        # interpolated depth (a convex combination of its copy's vertex depths)
         z_near = _z_range(hull)[0]
+        z_near -= 1e-6 * dr.abs(z_near)
 
         def sample(X):
             index = sample_index(view, X, Y, aa)
