@@ -306,3 +306,42 @@ def test_layers_are_the_copies_drawn_as_triangles(variant, kind):
             if "initial" in kw_layers:   # nothing drawn behind the wall
                 mine = got != zbuffer.EMPTY
                 assert np.all(z(got[mine]) <= z(np.array(over)[mine]))
+
+
+def face_on_stack():
+    """A 4 x 4 grid of quads in the plane y = 1, facing the camera at (0, -5, 0), and a
+    step of 0.01 towards it per copy: every copy's fragments lie at its vertices' depth."""
+    g = np.linspace(-0.9, 0.9, 5)
+    x, z = np.meshgrid(g, g)
+    vertices = np.stack([x.ravel(), np.ones(25), z.ravel()], 1)
+    i = (np.arange(4)[:, None] * 5 + np.arange(4)[None]).ravel()
+    faces = np.concatenate([np.stack([i, i + 1, i + 6], 1), np.stack([i, i + 6, i + 5], 1)])
+    step = mi.Vector3f(dr.zeros(mi.Float, 25), dr.full(mi.Float, -0.01, 25), dr.zeros(mi.Float, 25))
+    return make_mesh("stack", vertices, faces), step
+
+
+@pytest.mark.parametrize("kind", ["perspective", "orthographic"])
+def test_layers_over_their_own_depths_keep_every_fragment(variant, kind):
+    """rasterise_layers drawn over its own result with every id raised (same depths): each
+    sample's fragment ties the stored depth and wins it by its smaller id, so the result is
+    the first one exactly — no prism is skipped whose fragment reaches the stored depth
+    (the per-sample skip behind the stored fragment, its rounding margin: face-on copies,
+    whose fragments lie at the prism's nearest depth), with and without a discard."""
+    layers = 7
+    mesh = random_triangles(seed=5)
+    step, _ = layered(mesh, layers)
+    stack, stack_step = face_on_stack()
+    scenes = [(mesh, step, sensor_of(kind)),
+              (stack, stack_step, camera(kind=kind, origin=(0, -5, 0)))]
+    checker = lambda f, active: lambda s, k, b1, b2, a: ((s // 5 + k) % 3) != 0
+    for shape, shape_step, sensor in scenes:
+        geom = zbuffer.gather_geometry([shape])
+        view = zbuffer.view_from_sensor(load({"m": shape}, sensor).sensors()[0], 1)
+        for alpha in (None, checker):
+            first, _ = zbuffer.rasterise_layers(view, geom, shape_step, layers, alpha=alpha)
+            drawn = first != zbuffer.EMPTY
+            raised = dr.select(drawn, first | mi.UInt64(0xFFFFFFFF), first)   # depth kept
+            again, _ = zbuffer.rasterise_layers(view, geom, shape_step, layers, alpha=alpha,
+                                                initial=raised)
+            assert dr.count(drawn)[0] > 0.1 * dr.width(first)
+            assert dr.all(again == first)[0], (kind, shape.id(), alpha is None)
