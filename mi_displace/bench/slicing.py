@@ -21,9 +21,9 @@ warm-up frames each):
   ``speedup_vs_llvmpipe_same_work``; ``render_time_same_work_later_s`` /
   ``llvmpipe_later_s`` / ``speedup_vs_llvmpipe_same_work_later``: the same pair timed
   again the same way at the end, after every other scene of the benchmark was drawn (the
-  kernels and buffers they left make our frame slower: see docs/slicing.md);  The peer shades with the interpolated base normal
-  from a 1024^2 height texture; we still shade with the displaced normal of the
-  procedural height (a few lookups per pixel);
+  kernels and buffers they left make our frame slower: see docs/slicing.md). The peer
+  shades with the interpolated base normal from a 1024^2 height texture; we shade with the
+  displaced normal of the procedural height (a few lookups per pixel);
   ``auto_slices``: what ``slices="auto"`` chooses for this view;
 * ``true_displacement_time_warm_s``: the same donut tessellated by ``displaced`` at
   ``resolution`` 2048 (converged: ``converged_flip`` = FLIP between 1024 and 2048), under

@@ -23,6 +23,7 @@ enter; it carries the wall flag 1.  Units: world units; arrays NumPy float64 unl
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -207,6 +208,20 @@ def vertex_table(bm: BaseMesh) -> mi.Float:
     table = np.zeros((len(bm.positions), TABLE_WIDTH), np.float32)
     table[:, :11] = np.concatenate([bm.uvs, bm.normals, bm.su, bm.sv], 1)
     return mi.Float(table.ravel())
+
+
+def prism_geometry(slices: "SliceScene", bm: BaseMesh, scale: float, n: int):
+    """Direction a's ``n`` slices as layered copies for
+    :func:`mi_displace.render.zbuffer.rasterise_layers`: slice 0's triangles (the base
+    polygons; slice k's vertex k V + v and face k F + f, :func:`aligned_slices`) and the
+    per-vertex offset between consecutive slices, (V,) Vector3f [world units]."""
+    full = slices.geometry()
+    V, F = len(bm.positions), len(bm.faces)
+    base = dataclasses.replace(full, positions=dr.gather(mi.Point3f, full.positions, dr.arange(mi.UInt32, V)),
+                               faces=dr.gather(mi.Vector3u, full.faces, dr.arange(mi.UInt32, F)))
+    step = mi.Vector3f(*(mi.Float(c) for c in (bm.extrude * (scale / n)).astype(np.float32).T))
+    dr.eval(base.positions, base.faces, step)
+    return base, step
 
 
 def _check_size(triangles: int, what: str) -> None:

@@ -145,9 +145,9 @@ def _box_counts(view: zbuffer.View, aa: int, mask: mi.Bool, boxes) -> mi.UInt32:
 def _store(frame: FrameBuffer, ray, found, keys, clip, geom, attributes) -> None:
     """Write into ``frame`` (:attr:`FrameBuffer.packed`, :attr:`FrameBuffer.found`) the
     fragments of ``keys`` where ``found`` (only those samples are resolved): the point at
-    the key's depth on the sample's ray, and ``attributes(tri, b1, b2) -> (uv, n, su, sv)`` at the barycentrics
-    of the key's triangle of ``geom`` (clip-space vertices ``clip``) at the sample (n
-    normalised); one packet scatter per sample."""
+    the key's depth on the sample's ray, and ``attributes(tri, b1, b2) -> (uv, n, su, sv)``
+    at the barycentrics of the key's triangle of ``geom`` (clip-space vertices ``clip``) at
+    the sample (n normalised); one packet scatter per sample."""
     index = dr.compress(found)
     if dr.width(index) == 0:
         return
@@ -224,12 +224,9 @@ def _draw_aligned(volume: SlicedVolume, view, aa, slices, start):
     layered copies of slice 0 (:func:`mi_displace.render.zbuffer.rasterise_layers`: one
     prism per base polygon, front to back).  Returns ``(keys, clip, geom, attributes)``
     (:func:`_store`; the attributes read from the base vertices, one packet per corner)."""
-    bm, n = volume.bm, volume.counts["a"]
-    V, F = len(bm.positions), len(bm.faces)
+    n, V = volume.counts["a"], len(volume.bm.positions)
     full = slices.geometry()
-    base = dataclasses.replace(full, positions=dr.gather(mi.Point3f, full.positions, dr.arange(mi.UInt32, V)),
-                               faces=dr.gather(mi.Vector3u, full.faces, dr.arange(mi.UInt32, F)))
-    step = mi.Vector3f(*(mi.Float(c) for c in (bm.extrude * (volume.scale / n)).astype(np.float32).T))
+    base, step = volume.prisms   # built with the volume: slice 0 and the step between slices
 
     def alpha(f, active):   # every copy has slice 0's uvs; copy k's h_α is k / N
         uvs = _corner_uvs(slices, slices.corners(f, active), active)

@@ -101,8 +101,12 @@ class SlicedVolume:
             self.families[fam] = (geo.SliceScene(geo.concat([sm, walls]), f"slices_{fam}"),
                                   4 * self.counts[fam] + 64)
         self.walls_scene = geo.SliceScene(walls, "walls")   # also the proxy's face frames
-        #: direction a's vertex attributes for the rasteriser (mi_displace.slicing.rasterised)
-        self.vertex_table = geo.vertex_table(bm) if "a" in FAMILIES[direction] else None
+        #: direction a for the rasteriser (mi_displace.slicing.rasterised): the base vertices'
+        #: attributes, slice 0's triangles and the step between slices
+        self.vertex_table = self.prisms = None
+        if "a" in FAMILIES[direction]:
+            self.vertex_table = geo.vertex_table(bm)
+            self.prisms = geo.prism_geometry(self.families["a"][0], bm, scale, slices)
         #: the slices rasterised for the current raster frame (mi_displace.slicing.rasterised)
         self.frame = None
         if direction == "screen":
