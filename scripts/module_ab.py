@@ -1,0 +1,89 @@
+"""A/B of library modules in ONE process: the modules as they are in the work tree against
+the same modules as of a git commit, swapped in by name (their functions and constants),
+on one scene's raster frame.  Prints whether the two images are identical (and finite),
+then ROUNDS x (median wall seconds of REPS frames drawn alternately, old and new) and their
+ratio: both versions see the same moments of a shared machine.
+
+    ./.venv/bin/python scripts/module_ab.py BASE MODULES SCENE [name=value ...]
+
+    BASE     a commit (e.g. c154be8)
+    MODULES  comma-separated paths under mi_displace/ without .py
+             (e.g. render/zbuffer,slicing/rasterised,render/raster)
+    SCENE    a file in scenes/ (e.g. slicing_plane_grazing.xml); name=value: its defaults
+             (mode=approximation integrator=raster are set unless given)
+
+Environment: REPS (9), ROUNDS (3).  The scene's integrator renders both frames; the
+modules' other users in the process see the swap too (a module's functions look up its
+globals, so the old functions call the old helpers)."""
+import importlib
+import os
+import statistics
+import subprocess
+import sys
+import time
+import types
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def old_module(name: str, path: str, base: str) -> types.ModuleType:
+    source = subprocess.run(["git", "-C", str(ROOT), "show", f"{base}:mi_displace/{path}.py"],
+                            capture_output=True, text=True, check=True).stdout
+    module = types.ModuleType(name + "_old")
+    sys.modules[module.__name__] = module   # dataclasses look their module up
+    module.__file__ = str(ROOT / "mi_displace" / f"{path}.py")
+    exec(compile(source, module.__name__, "exec"), module.__dict__)
+    return module
+
+
+def main(base: str, modules: str, scene: str, *params: str) -> None:
+    import drjit as dr
+    import mitsuba as mi
+
+    import mi_displace
+    mi_displace.init()
+    swaps = []
+    for path in modules.split(","):
+        name = "mi_displace." + path.replace("/", ".")
+        new = importlib.import_module(name)
+        own = {k: v for k, v in vars(new).items()
+               if (callable(v) and getattr(v, "__module__", None) == name) or isinstance(v, (int, float))}
+        swaps.append((new, own, old_module(name, path, base)))
+
+    def use(which: str) -> None:
+        for new, own, old in swaps:
+            for k, v in own.items():
+                setattr(new, k, v if which == "new" else vars(old).get(k, v))
+
+    defaults = {"mode": "approximation", "integrator": "raster"}
+    defaults.update(p.split("=", 1) for p in params)
+    loaded = mi.load_file(str(ROOT / "scenes" / scene), **defaults)
+
+    def frame(which: str) -> np.ndarray:
+        use(which)
+        return np.asarray(mi.render(loaded), np.float32)
+
+    a, b = frame("old"), frame("new")
+    print(f"identical: {np.array_equal(a, b)}, max |difference| {float(np.abs(a - b).max()):.3g}, "
+          f"finite: {bool(np.isfinite(b).all())}, mean {float(b.mean()):.4f}")
+    reps, rounds = int(os.environ.get("REPS", 9)), int(os.environ.get("ROUNDS", 3))
+    for _ in range(rounds):
+        times = {"old": [], "new": []}
+        for _ in range(reps):
+            for which in ("old", "new"):
+                dr.sync_thread()
+                start = time.perf_counter()
+                frame(which)
+                times[which].append(time.perf_counter() - start)
+        old, new = (statistics.median(times[w]) for w in ("old", "new"))
+        print(f"old {old:.4f} s  new {new:.4f} s  new/old {new / old:.3f}")
+    use("new")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) < 4:
+        sys.exit(__doc__)
+    main(*sys.argv[1:])
