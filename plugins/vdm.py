@@ -29,7 +29,6 @@ use on any shape (c_V = 0).  Algorithm: :mod:`mi_displace.vdm`.
 from __future__ import annotations
 
 import math
-import sys
 import warnings
 
 import drjit as dr
@@ -114,19 +113,6 @@ def _round_out(x: float, direction, digits: int = 4) -> float:
     step = 10.0 ** (math.floor(math.log10(abs(x))) - digits + 1)
     return direction(x / step) * step
 
-def _rendering(bsdf: mi.BSDF) -> bool:
-    """Whether the scene being rendered holds ``bsdf``: the innermost ``mi.Scene`` among the
-    locals of the calling Python frames (``mi.render``'s, an integrator's ``render`` or
-    ``sample``) traverses to it; True when no frame holds a scene."""
-    frame = sys._getframe(1)
-    while frame is not None:
-        scenes = [v for v in frame.f_locals.values() if isinstance(v, mi.Scene)]
-        if scenes:
-            return any(bsdf in mi.traverse(scene).hierarchy for scene in scenes)
-        frame = frame.f_back
-    return True
-
-
 class MesostructureBSDF(mi.BSDF):
     """Base of the per-pixel mesostructure BSDFs: flags, nested BSDF plumbing.
 
@@ -208,27 +194,40 @@ class MesostructureBSDF(mi.BSDF):
             return dr.full(mi.Float, tile_size, dr.width(si.t))
         return tile_size * placement_scale(si, active)
 
-    def _require(self, ready: bool) -> None:
-        if not ready:
-            raise ValueError(
-                f"{self.PLUGIN}: BSDF {self.id()!r} is not set up: put it inside a "
+    def setup_problem(self) -> str | None:
+        """Why this BSDF cannot render its mesostructure (one line), or ``None`` when it can.
+
+        Scene loaders call it after loading (``mi_displace.render.scene.load``, the CLI) and
+        turn a message into an error before anything renders."""
+        if self._ready():
+            return None
+        return (f"{self.PLUGIN}: BSDF {self.id()!r} is not set up: put it inside a "
                 "<shape type=\"vdm_mesh\"> (tile size and curvature measured there) or give "
                 "'tile_size' [world units of one texture tile]")
+
+    def _require(self, ready: bool) -> None:
+        if not ready:
+            raise ValueError(self.setup_problem())
 
     def _ready(self) -> bool:
         """Whether the precomputation is done (subclasses that set up late)."""
         return True
 
     def _unused(self) -> bool:
-        """True for a BSDF that is not set up and not in the scene being rendered.
+        """True for a BSDF that is not set up: it traces as its nested material.
 
-        Dr.Jit traces every live BSDF into each vectorised call, also those of other scenes
-        still alive (kept by a reference cycle or a notebook's last traceback); such a BSDF
-        traces as its nested material there (no lane reaches it).  Raises the "not set up"
-        error when the scene being rendered holds it (or no scene is found)."""
+        Never an exception inside a trace: Dr.Jit traces every live BSDF into each
+        vectorised call, also those of other scenes still alive (a reference cycle, a
+        notebook's last traceback), so a raise here would break renders of scenes that do
+        not hold this BSDF.  The user hears of it once, by a warning naming the fix; our
+        loaders refuse such a scene before rendering (``setup_problem``)."""
         if self._ready():
             return False
-        self._require(not _rendering(self))
+        if not self.stats.get("not_set_up_warned"):
+            self.stats["not_set_up_warned"] = True
+            message = self.setup_problem() + "; it renders as its nested BSDF"
+            warnings.warn(message)
+            mi.Log(mi.LogLevel.Warn, message)
         return True
 
     def _state(self, si, active):

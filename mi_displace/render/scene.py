@@ -144,7 +144,8 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
     Raises:
         FileNotFoundError: ``path`` does not exist.
         ValueError: Mitsuba rejects the scene or a parameter (message names the file), or
-            the scene has no integrator or no sensor.
+            the scene has no integrator or no sensor, or a shape's BSDF is not set up
+            (its ``setup_problem()``: a ``vdm`` without ``tile_size`` outside a ``vdm_mesh``).
     """
     path = Path(path)
     if not path.is_file():
@@ -169,6 +170,10 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
         fit = getattr(shape, "fit_to_scene", None)
         if fit is not None:
             fit(scene)
+    for shape in scene.shapes():   # a BSDF that cannot render what it models (vdm without a tile size)
+        problem = getattr(shape.bsdf(), "setup_problem", lambda: None)()
+        if problem:
+            raise ValueError(f"scene {str(path)!r}: {problem}")
     dr.sync_thread()
     build_s = time.perf_counter() - start
     for what, found in (("integrator", scene.integrator()), ("sensor", scene.sensors())):
