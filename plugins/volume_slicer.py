@@ -14,6 +14,7 @@
         <float name="iso" value="0.5"/>               <!-- surface: iso value of tau(O) -->
         <boolean name="shadows" value="true"/>
         <integer name="aa" value="1"/>
+        <boolean name="reuse_lookup" value="true"/>   <!-- shade with the density step's D_k lookup (false: read again; same image, slower) -->
     </integrator>
 
 A separate integrator rather than a mode of ``raster``: ``raster`` shades the first opaque
@@ -49,7 +50,8 @@ class VolumeSlicer(mi.SamplingIntegrator):
             color=(0.8, 0.7, 0.55) if color is None else tuple(mi.ScalarColor3f(color)),
             iso=float(props.get("iso", 0.5)), sharpness=float(props.get("sharpness", 4.0)),
             shadows=boolean("volume_slicer", props, "shadows", True),
-            light_resolution=props.get("light_resolution", None), aa=int(props.get("aa", 1)))
+            light_resolution=props.get("light_resolution", None), aa=int(props.get("aa", 1)),
+            reuse_lookup=boolean("volume_slicer", props, "reuse_lookup", True))
         slicing.check_slices(volume.volume, self.settings)
 
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):

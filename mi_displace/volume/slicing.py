@@ -46,19 +46,19 @@ MODELS = ("scatter", "surface")
 EARLY_STOP = 1e-4
 #: Most slices (refused before rendering).
 MAX_SLICES = 8192
-#: Shade a visible sample with the D_k lookup of its density step (pre-image and read points)
-#: instead of reading the D_k again; False re-reads them (the same image bit for bit, tested).
-REUSE_LOOKUP = True
 
 
 class SliceSettings:
     """Renderer settings (module docstring); ``spacing`` in object voxels; ``albedo`` a
     constant or an :class:`~mi_displace.volume.field.AlbedoField` (then it is also the
-    surface model's reflectance in place of ``color``)."""
+    surface model's reflectance in place of ``color``).  ``reuse_lookup``: shade a visible
+    sample with the D_k lookup of its density step (pre-image and read points) instead of
+    reading the D_k again; False re-reads them (the same image bit for bit, tested; kept as a
+    setting for the A/B of ``scripts/volume_overhead_ab.py``)."""
 
     def __init__(self, model="scatter", normals="jacobian", spacing=1.0, albedo=0.8,
                  color=(0.8, 0.7, 0.55), iso=0.5, sharpness=4.0, shadows=True,
-                 light_resolution=None, aa=1):
+                 light_resolution=None, aa=1, reuse_lookup=True):
         if model not in MODELS:
             raise ValueError(f"model: must be one of {MODELS}, got {model!r}")
         if normals not in NORMALS:
@@ -76,6 +76,7 @@ class SliceSettings:
         self.albedo = 1.0 if self.albedo_field is not None else float(albedo)
         self.color, self.iso, self.sharpness = tuple(float(c) for c in color), float(iso), float(sharpness)
         self.shadows, self.light_resolution, self.aa = bool(shadows), light_resolution, int(aa)
+        self.reuse_lookup = bool(reuse_lookup)
 
 
 def check_slices(vol: DisplacedVolume, s: SliceSettings) -> int:
@@ -254,7 +255,7 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
     # the density step's D_k lookup (pre-image, read points, α factors) goes on to the
     # shading of the same sample, which then reads no D_k again (only J and ∇α for the normal)
     own_albedo = s.albedo_field is not None and s.albedo_field.volume is vol
-    reuse = REUSE_LOOKUP and vol.mode == "approximation" and (
+    reuse = s.reuse_lookup and vol.mode == "approximation" and (
         (s.model == "surface" and s.normals != "fd") or own_albedo)
 
     def shade(x, r):

@@ -169,9 +169,9 @@ def test_fast_paths_agree_with_the_slow_ones(variant, monkeypatch, tilt):
     assert np.array_equal(np.array(fast.alpha), np.array(slow.alpha))
     everywhere = lambda v, s, lo, hi: (np.array([1, 1, 1]), mi.Float([0.0]))   # one occupied cell
     monkeypatch.setattr(slicing, "occupancy", everywhere)
-    monkeypatch.setattr(slicing, "REUSE_LOOKUP", False)                # shading reads the D_k again
-    for kw, img in zip(props, images):
-        assert img.max() > 0 and np.array_equal(img, _render(_scene("volume_slicer", vol, **kw))), kw
+    for kw, img in zip(props, images):                                  # shading reads the D_k again
+        again = _render(_scene("volume_slicer", vol, reuse_lookup=False, **kw))
+        assert img.max() > 0 and np.array_equal(img, again), kw
 
 def test_volume_methods_in_a_trace_run_with_the_collector_paused(variant, monkeypatch):
     """volpath's medium calls are vectorised: Dr.Jit traces every live medium, holding plain
