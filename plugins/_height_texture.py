@@ -24,7 +24,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.core import heightfield as hf
-from mi_displace.plugins._guard import collector_paused
+from mi_displace.core.collector import collector_paused
 
 _BASES: dict[str, type] = {}
 

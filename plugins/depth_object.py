@@ -26,7 +26,7 @@ import numpy as np
 
 from mi_displace.core.mesh_io import resolve_path
 from mi_displace.plugins.slicing import SlicingBSDF, _slice_count
-from mi_displace.plugins.vdm import nested_objects
+from mi_displace.vdm.mesostructure import nested_objects
 from mi_displace.slicing import depth_object as dobj
 from mi_displace.vdm.frame import shading_interaction
 from mi_displace.plugins._guard import constructor

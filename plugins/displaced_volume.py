@@ -54,7 +54,8 @@ from mi_displace.volume import maps as primitives
 from mi_displace.volume.displacement import DisplacementChain, PlacedMap
 from mi_displace.volume.field import AlbedoField, DisplacedVolume
 from mi_displace.volume.objects import load_raw, load_vol, piggy_bank
-from mi_displace.plugins._guard import collector_paused, constructor
+from mi_displace.core.collector import collector_paused
+from mi_displace.plugins._guard import constructor
 
 MAX_MAPS = 32
 OUTPUTS = ("sigma_t", "albedo")

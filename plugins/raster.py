@@ -20,7 +20,8 @@ acceleration structure built (``docs/raster.md``).
 import mitsuba as mi
 
 from mi_displace.render import raster
-from mi_displace.plugins._guard import collector_paused, constructor
+from mi_displace.core.collector import collector_paused
+from mi_displace.plugins._guard import constructor
 
 
 class Raster(mi.SamplingIntegrator):

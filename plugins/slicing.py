@@ -43,7 +43,7 @@ import numpy as np
 
 from mi_displace.core.texture_height import check_texture_finite
 from mi_displace.plugins.displaced import BASE_PARAMS
-from mi_displace.plugins.vdm import MesostructureBSDF, nested_objects
+from mi_displace.vdm.mesostructure import MesostructureBSDF, nested_objects, read_shared
 from mi_displace.slicing import geometry as geo
 from mi_displace.slicing.sliced import DIRECTIONS, SlicedVolume
 from mi_displace.vdm.frame import shading_interaction
@@ -60,7 +60,7 @@ class SlicingBSDF(MesostructureBSDF):
     HAS_SILHOUETTE = True
 
     def __init__(self, props: mi.Properties, model):
-        super().__init__(props)
+        super().__init__(props, read_shared(props, self.PLUGIN))
         self.model = model   # a SlicedVolume (or a DepthObject in the subclass)
         self.self_shadows = bool(props.get("self_shadows", True))
         self._cache = None
