@@ -28,8 +28,8 @@ _TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
 
 #: Parameter types and the Mitsuba object class a nested object must be.
 TYPES = {"float": None, "int": None, "bool": None, "string": None, "rgb": None,
-         "transform": None, "texture": "Texture", "bsdf": "BSDF", "sensor": "Sensor",
-         "volume": "Volume", "shape": "Shape", "emitter": "Emitter"}
+         "transform": None, "float|volume": None, "texture": "Texture", "bsdf": "BSDF",
+         "sensor": "Sensor", "volume": "Volume", "shape": "Shape", "emitter": "Emitter"}
 
 
 @dataclass(frozen=True)
@@ -38,7 +38,8 @@ class Param:
 
     Attributes:
         name: the XML / ``load_dict`` name.
-        type: one of :data:`TYPES` (``float`` accepts integers; ``int`` accepts integral floats).
+        type: one of :data:`TYPES` (``float`` accepts integers; ``int`` accepts integral floats;
+            ``float|volume`` a number or a nested / referenced volume).
         default: the value when absent (:data:`REQUIRED`: it must be given; ``None``: optional).
         doc: one line for the reference.
         unit: e.g. ``"world"``, ``"px"``, ``"rad"`` (empty: dimensionless).
@@ -81,6 +82,8 @@ class Param:
         if self.auto and isinstance(value, str) and value.strip().lower() == "auto":
             return "auto"
         kind = self.type
+        if kind == "float|volume":     # a number, or a <ref> to a volume
+            kind = "volume" if isinstance(value, mi.Volume) else "float"
         if kind in ("float", "int"):
             if isinstance(value, bool) or not isinstance(value, (int, float, str)):
                 raise ValueError(f"{where} must be a number, got {_shown(value)}")
@@ -113,8 +116,13 @@ class Param:
                 raise ValueError(f"{where} must be one of {', '.join(self.choices)}, got {value!r}")
             return value
         if kind == "rgb":
-            return value    # Mitsuba converts <rgb> / a 3-list itself
+            try:
+                return tuple(float(c) for c in mi.ScalarColor3f(value))
+            except (TypeError, ValueError):
+                raise ValueError(f"{where} must be an RGB colour, got {_shown(value)}") from None
         if kind == "transform":
+            if not isinstance(value, mi.ScalarTransform4f):
+                raise ValueError(f"{where} must be a <transform>, got {_shown(value)}")
             return value
         cls = getattr(mi, TYPES[kind])
         if not isinstance(value, cls):
