@@ -25,13 +25,14 @@ SPEC = PluginSpec(
         Param("model", "string", "scatter", "`scatter` (matches volpath) or `surface`",
               choices=slicing.MODELS),
         Param("normals", "string", "jacobian", "surface model: how normals are found", choices=NORMALS),
-        Param("spacing", "float", 1.0, "distance between slices", unit="object voxels", low=1e-9),
+        Param("spacing", "float", 1.0, "distance between slices", unit="object voxels", low=0, open_low=True),
         Param("albedo", "float|volume", 0.8, "scatter: the medium's albedo, or a `displaced_volume` "
               "with output=\"albedo\" (then also the surface colour)", low=0, high=1),
         Param("color", "rgb", (0.8, 0.7, 0.55), "surface model: diffuse reflectance"),
-        Param("iso", "float", 0.5, "surface model: iso value of tau(O)", low=0, high=1),
+        Param("iso", "float", 0.5, "surface model: iso value of tau(O)", low=0, high=1,
+              open_low=True, open_high=True),
         Param("sharpness", "float", 4.0, "surface model: extinction ramp of the iso-surface",
-              unit="1/voxel", low=1e-6),
+              unit="1/voxel", low=0, open_low=True),
         Param("shadows", "bool", True, "shadows through a light-transmittance grid"),
         Param("light_resolution", "int", None, "light grid nodes per side (default: about one per "
               "object voxel, 24–96)", low=2, high=1024),

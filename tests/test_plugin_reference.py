@@ -64,9 +64,12 @@ def _scene_xml(body: str) -> str:
 
 def _with_property(spec, xml: str) -> str:
     """The example with ``xml`` (a property) added to the plugin's own element."""
-    pattern = re.compile(rf'(<\w+ type="{spec.plugin}"[^>]*>)')
+    pattern = re.compile(rf'<(\w+)( type="{spec.plugin}"[^>]*?)(/?)>')
     assert pattern.search(spec.example), spec.plugin
-    return pattern.sub(lambda m: m.group(1) + xml, spec.example, count=1)
+
+    def add(m):   # <tag type=...> gets xml first; a self-closing one is opened and closed
+        return f"<{m.group(1)}{m.group(2)}>{xml}" + (f"</{m.group(1)}>" if m.group(3) else "")
+    return pattern.sub(add, spec.example, count=1)
 
 
 @pytest.mark.parametrize("spec", _specs(), ids=lambda s: s.plugin)

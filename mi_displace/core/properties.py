@@ -43,7 +43,8 @@ class Param:
         default: the value when absent (:data:`REQUIRED`: it must be given; ``None``: optional).
         doc: one line for the reference.
         unit: e.g. ``"world"``, ``"px"``, ``"rad"`` (empty: dimensionless).
-        low, high: inclusive bounds of a number (``None``: open).
+        low, high: bounds of a number (``None``: none), inclusive unless ``open_low`` /
+            ``open_high``.
         choices: the strings a ``string`` parameter accepts.
         auto: also accepts the string ``"auto"`` (sized from the scene).
         editable, differentiable: its ``mi.traverse`` flags (reference only).
@@ -55,6 +56,8 @@ class Param:
     unit: str = ""
     low: float | None = None
     high: float | None = None
+    open_low: bool = False
+    open_high: bool = False
     choices: tuple[str, ...] | None = None
     auto: bool = False
     editable: bool = False
@@ -69,9 +72,9 @@ class Param:
         if self.choices:
             text = " | ".join(self.choices)
         elif self.low is not None or self.high is not None:
-            lo = "-inf" if self.low is None else f"{self.low:g}"
-            hi = "inf" if self.high is None else f"{self.high:g}"
-            text = f"[{lo}, {hi}]"
+            lo = "(-inf" if self.low is None else f"{'(' if self.open_low else '['}{self.low:g}"
+            hi = "inf)" if self.high is None else f"{self.high:g}{')' if self.open_high else ']'}"
+            text = f"{lo}, {hi}"
         else:
             text = ""
         return f"{text} or auto" if self.auto and text else ("auto" if self.auto else text)
@@ -97,7 +100,9 @@ class Param:
                 if x != int(x):
                     raise ValueError(f"{where} must be an integer, got {value!r}")
                 x = int(x)
-            if (self.low is not None and x < self.low) or (self.high is not None and x > self.high):
+            below = self.low is not None and (x <= self.low if self.open_low else x < self.low)
+            above = self.high is not None and (x >= self.high if self.open_high else x > self.high)
+            if below or above:
                 raise ValueError(f"{where} must lie in {self.range_text().removesuffix(' or auto')}"
                                  f"{' ' + self.unit if self.unit else ''}, got {value!r}")
             return x
@@ -121,7 +126,7 @@ class Param:
             except (TypeError, ValueError):
                 raise ValueError(f"{where} must be an RGB colour, got {_shown(value)}") from None
         if kind == "transform":
-            if not isinstance(value, mi.ScalarTransform4f):
+            if not hasattr(value, "matrix"):     # Scalar(Affine)Transform4f/4d/3f
                 raise ValueError(f"{where} must be a <transform>, got {_shown(value)}")
             return value
         cls = getattr(mi, TYPES[kind])

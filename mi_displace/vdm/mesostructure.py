@@ -27,11 +27,11 @@ from mi_displace.core.collector import collector_paused
 PARAMS = (
     Param("height", "texture", REQUIRED, "height H in [0, 1] (1 = the reference surface)"),
     Param("depth", "float", 0.05, "depth of H = 0 below the reference surface", unit="world", low=0),
-    Param("tiling", "float", None, "texture periods per unit u and v (default of both below)", low=1e-6),
-    Param("tiling_u", "float", None, "texture periods per unit u (default: tiling, else 1)", low=1e-6),
-    Param("tiling_v", "float", None, "texture periods per unit v (default: tiling, else 1)", low=1e-6),
+    Param("tiling", "float", None, "texture periods per unit u and v (default of both below)", low=0, open_low=True),
+    Param("tiling_u", "float", None, "texture periods per unit u (default: tiling, else 1)", low=0, open_low=True),
+    Param("tiling_v", "float", None, "texture periods per unit v (default: tiling, else 1)", low=0, open_low=True),
     Param("tile_size", "float", None, "world size of one texture tile, for use outside a "
-          "vdm_mesh (else measured by the vdm_mesh)", unit="world", low=1e-9),
+          "vdm_mesh (else measured by the vdm_mesh)", unit="world", low=0, open_low=True),
 )
 
 
