@@ -25,9 +25,9 @@ Screen-adaptive dicing (:mod:`mi_displace.core.dicing`, Cycles' meaning): ``dici
 ``offscreen_dicing_scale`` (default 4, coarser outside the view frustum and behind the
 camera).  The sensors are those referenced in the shape (``<ref id="camera"/>``, any number:
 the finest need wins); without one the shape dices coarsely and warns until
-:func:`mi_displace.core.dicing.redice` gives it the scene's sensors (the mi-displace loaders
+:func:`mi_displace.fit_to_sensors` gives it the scene's sensors (the mi-displace loaders
 do).  ``dicing_rate`` and ``offscreen_dicing_scale`` are editable through ``mi.traverse``;
-every edit (and ``redice`` after a camera edit) recomputes the edge rates and rebuilds
+every edit (and ``fit_to_sensors`` after a camera edit) recomputes the edge rates and rebuilds
 only what changed: the topology is kept when no edge rate moved.
 
 ``build_stats`` (a dict attribute, printed by ``mi-displace render --explain``): mode, rate,
@@ -198,7 +198,7 @@ class Displaced(mi.Mesh):
         if not views:
             warn.append(f"{owner}: dicing_rate needs a sensor and none is referenced "
                         "(<ref id=\"...\"/> in the shape); diced coarsely until "
-                        "mi_displace.core.dicing.redice(scene) gives it the scene's sensors")
+                        "mi_displace.fit_to_sensors(scene) gives it the scene's sensors")
             views = None
         c = self._cache
         if self.base is not None:
@@ -309,9 +309,9 @@ class Displaced(mi.Mesh):
         height = height_function(self.height_texture, 1e-3)
         return lambda uv: self.scale * (height(uv)[0] - self.midlevel)
 
-    def redice_for(self, sensors) -> bool:
+    def fit_to_sensors(self, sensors) -> bool:
         """Dice for ``sensors`` (the scene's) unless the shape references its own; True if
-        anything was rebuilt.  Called by :func:`mi_displace.core.dicing.redice`."""
+        anything was rebuilt.  Called by :func:`mi_displace.core.dicing.fit_to_sensors`."""
         if not self.dicing:
             return False
         if sensors is not None and not self._own_sensors():

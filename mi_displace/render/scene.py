@@ -26,7 +26,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.core.dicing import redice
+from mi_displace.core.dicing import fit_to_sensors
 from mi_displace.core.progress import bar as progress_bar
 
 #: Largest number of samples (pixels x spp) rendered in one ``mi.render`` call; larger
@@ -155,21 +155,12 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
         raise RuntimeError("no Mitsuba variant is set: call mi_displace.init() first")
     dr.sync_thread()
     start = time.perf_counter()
-    from mi_displace.ddm.model import SENSOR_FIT
-
-    SENSOR_FIT.pending = True      # ddm "auto" waits for the sensors (fitted below)
     try:
         scene = mi.load_file(str(path), **params)
-        # shapes that dice for the scene's sensors but reference none of their own
-        redice(scene)
+        # shapes sized for the scene's sensors but referencing none of their own
+        fit_to_sensors(scene)
     except RuntimeError as e:
         raise _translate_load_error(path, e) from None
-    finally:
-        SENSOR_FIT.pending = False
-    for shape in scene.shapes():   # shapes whose quality follows the sensors (ddm "auto")
-        fit = getattr(shape, "fit_to_scene", None)
-        if fit is not None:
-            fit(scene)
     for shape in scene.shapes():   # a BSDF that cannot render what it models (vdm without a tile size)
         problem = getattr(shape.bsdf(), "setup_problem", lambda: None)()
         if problem:
