@@ -99,12 +99,14 @@ def load(filename, **kw):
         return mi.load_dict(props), mi.load_dict({**props, "scale": 0.0})
 
 
-def seam_rays(flat, shape):
+def seam_rays(flat, shape, nudge=1e-3):
     """Rays from outside at every seam edge (an edge whose copies are separate vertices on
     each side), aimed along the base's inward normal at the mean of the copies' midpoints
-    (the sides' if they part), nudged 1e-3 of the way into each adjacent triangle so that
-    a closed surface is hit inside a face, not exactly on its edge.  Returns the rays, the
-    distance from each origin to its target and the base's size."""
+    (the sides' if they part), nudged ``nudge`` of the way into each adjacent triangle so
+    that a closed surface is hit inside a face: a ray through exactly a shared edge can miss
+    both faces in Embree without its robust mode (16 of 304 on the closed UV sphere with
+    ``nudge=0``).  Returns the rays, the distance from each origin to its target and the
+    base's size."""
     p0, n0, faces = buffers(flat)
     p, _, _ = buffers(shape)
     _, cls = np.unique(p0, axis=0, return_inverse=True)
@@ -126,7 +128,7 @@ def seam_rays(flat, shape):
     normal = normal[inverse[seam]]
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     centroid = p[faces[seam // 3]].mean(1)
-    target = target + 1e-3 * (centroid - mid)
+    target = target + nudge * (centroid - mid)
     size = np.linalg.norm(p0.max(0) - p0.min(0))
     origin = target + 0.05 * size * normal
     ray = mi.Ray3f(mi.Point3f(*origin.T.astype(np.float32)),
