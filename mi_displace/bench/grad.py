@@ -170,12 +170,13 @@ def million_sphere() -> dict:
 
 def redo_per_load_work(shape) -> None:
     """Recompute what a uniform ``displaced`` shape on a mesh base computes once per load
-    (refinement topology, vertex frames) and drop its thin-shell rays: the next edit does
+    (refinement topology, vertex frames, welded directions) and drop its thin-shell rays: the next edit does
     all the work every edit did before they were kept (the baseline of the benches)."""
     pos, _, _, faces = shape.mesh_data
     shape._topology = tessellate.subdivision_topology(faces, tessellate.weld_classes(pos),
                                                       shape.grid)
     shape._frames = tessellate.vertex_frames(*shape.mesh_data)
+    shape._directions = tessellate.welded_normals(pos, shape.mesh_data[1], faces)
     shape._rays = None
 
 

@@ -1,8 +1,9 @@
 """The slice polygons of displacement by slicing (§3) and the displacement volume.
 
 The *displacement volume* of a base polygon is its prism extruded along the interpolated
-vertex normals up to the maximum displacement ``scale``: a point of it is
-``P(b, h) = sum_i b_i (P_i + h scale n_i)`` (barycentrics b, normalised height h in [0, 1]).
+vertex directions up to the maximum displacement ``scale``: a point of it is
+``P(b, h) = sum_i b_i (P_i + h scale n_i)`` (barycentrics b, normalised height h in [0, 1];
+on a mesh base n_i is the welded normal, one per position, as ``displaced`` uses).
 The slices are the polygons a GPU draws through it, built once here with NumPy (one-off
 precomputation; the per-pixel work is in :mod:`mi_displace.slicing.trace`):
 
@@ -61,8 +62,9 @@ class BaseMesh:
         uvs: (V, 2) texture coordinates; faces: (F, 3) int64 vertex indices.
         su, sv: (V, 3) tangents dS/du, dS/dv [world units per unit uv].
         base: the parametric base (``None`` for a mesh file); to_world: (4, 4) matrix.
-        extrude: (V, 3) world displacement per unit of ``scale`` (the object-space normal
-            through to_world, as ``displaced`` displaces in object space); None: normals.
+        extrude: (V, 3) world displacement per unit of ``scale`` (the object-space
+            direction through to_world, as ``displaced`` displaces in object space: on a
+            mesh base the welded normal of :func:`tessellate.welded_normals`); None: normals.
     """
 
     positions: np.ndarray
@@ -138,15 +140,19 @@ def make_base_mesh(base_name: str, params: dict, filename: str | None, resolutio
             raise ValueError(f"{owner}: base 'mesh' needs a 'filename' (PLY/OBJ with UVs)")
         pos, nrm, uvs, faces = (np.asarray(a, np.float64) for a in load_uv_mesh(filename, owner))
         faces = faces.astype(np.int64)
+        # one direction per position (as `displaced`): the copies of a UV-seam or hard-edge
+        # position extrude together, so the slices close over the seam
+        direction = tessellate.welded_normals(pos, nrm, faces).astype(np.float64)
     else:
         base = surfaces.make_base(base_name, **params)
         nu, nv = tessellate.grid_resolution(base, resolution)
         t = tessellate.displace_parametric(base, None, 0.0, 0.0, nu, nv)
         pos, nrm, uvs = _columns(t.positions), _columns(t.normals), _columns(t.texcoords)
         faces = _columns(t.faces).astype(np.int64)
+        direction = nrm
     m = np.asarray(to_world, np.float64)
     pos = pos @ m[:3, :3].T + m[:3, 3]
-    extrude = nrm @ m[:3, :3].T
+    extrude = direction @ m[:3, :3].T
     nrm = nrm @ np.linalg.inv(m[:3, :3])
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
     if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(nrm)) and np.all(np.isfinite(uvs))):

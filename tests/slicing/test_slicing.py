@@ -194,6 +194,19 @@ def test_mesh_base_equals_parametric_plane(variant, helpers, tmp_path):
         assert flip(a, b)[0] < 0.01, direction
 
 
+def test_mesh_base_slices_close_over_uv_seams(variant, tmp_path):
+    """A UV sphere OBJ with a seam column and per-side loader normals: every copy of a
+    position extrudes by the same vector, so the top of the displacement volume (and every
+    slice between) welds into a closed surface, as the base does."""
+    from tests.plugins.test_displaced_seams import uv_sphere_obj, welded_edges
+
+    bm = geo.make_base_mesh("mesh", {}, uv_sphere_obj(tmp_path / "s.obj"), None, np.eye(4))
+    assert welded_edges(bm.positions, bm.faces) == (0, 0)
+    top = bm.positions + 0.1 * bm.extrude
+    assert np.all(np.isfinite(top))
+    assert welded_edges(top, bm.faces) == (0, 0)
+
+
 @pytest.mark.slow
 def test_torus_is_finite_and_close_to_displaced(variant, helpers):
     sensor = helpers.look([0, -3.6, 2.4], [0, 0, 0], fov=35, res=48)
