@@ -50,7 +50,7 @@ import numpy as np
 
 from mi_displace.core import dicing, surfaces, tessellate, thickness
 from mi_displace.core.mesh_io import load_uv_mesh
-from mi_displace.core.texture_height import check_texture_finite, height_function
+from mi_displace.core.texture_height import check_texture_finite, height_function, warn_if_srgb
 from mi_displace.core.thickness import crossing_check, crossing_warning
 from mi_displace.plugins._guard import boolean, constructor, take_sensors
 
@@ -128,6 +128,7 @@ class Displaced(mi.Mesh):
             props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float32)))
         if height is not None:
             check_texture_finite(height)
+            warn_if_srgb(height, "displaced")
 
         if base_name == "mesh":
             if "filename" not in props:
