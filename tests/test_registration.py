@@ -4,7 +4,6 @@ import subprocess
 import sys
 
 
-
 def test_import_registers_for_a_variant_already_set(variant):
     code = ("import mitsuba as mi; mi.set_variant('llvm_ad_rgb'); import mi_displace; "
             "print(type(mi.load_dict({'type': 'cells'})).__name__)")
