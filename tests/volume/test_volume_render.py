@@ -95,6 +95,9 @@ def test_bad_input(variant):
             _render(_scene("volume_slicer", vol, **props))
     with pytest.raises(RuntimeError, match="exactly one of"):
         mi.load_dict({"type": "displaced_volume"})
+    with pytest.raises(RuntimeError, match="displaced_volume: parameter 'to_world' is not supported"):
+        mi.load_dict({"type": "displaced_volume", "procedural": "piggy_bank", "resolution": 16,
+                      "to_world": mi.ScalarTransform4f().translate([1, 0, 0])})
     with pytest.raises(RuntimeError, match="singular"):
         mi.load_dict({"type": "displaced_volume", "procedural": "piggy_bank", "resolution": 16,
                       "map0_type": "wave", "map0_to_world": mi.ScalarTransform4f().scale([1, 0, 1])})
