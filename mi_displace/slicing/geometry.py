@@ -95,6 +95,17 @@ class BaseMesh:
         p = self.positions[self.faces]
         return float(np.mean(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2)))
 
+    def in_object_space(self) -> "BaseMesh":
+        """The same base before ``to_world`` (positions, tangents and extrusion mapped back
+        by its inverse; normals are the extrusion directions made unit)."""
+        m = np.asarray(self.to_world, np.float64)
+        inv = np.linalg.inv(m[:3, :3])
+        back = lambda v: v @ inv.T
+        extrude = back(self.extrude)
+        normals = extrude / np.maximum(np.linalg.norm(extrude, axis=1, keepdims=True), 1e-30)
+        return BaseMesh(back(self.positions - m[:3, 3]), normals, self.uvs, self.faces,
+                        back(self.su), back(self.sv), self.base, np.eye(4), extrude)
+
     def bbox(self, scale: float) -> tuple[np.ndarray, np.ndarray]:
         """Bounding box of the displacement volume (min, max), (3,) each."""
         pts = np.concatenate([self.positions, self.positions + scale * self.extrude])
@@ -158,6 +169,14 @@ def make_base_mesh(base_name: str, params: dict, filename: str | None, resolutio
     faces[inward] = faces[inward][:, ::-1]
     su, sv = vertex_tangents(pos, uvs, faces)
     return BaseMesh(pos, nrm, uvs, faces, su, sv, base, m, extrude)
+
+
+def transform_pair(matrix: np.ndarray) -> tuple[mi.Transform4f, mi.Transform4f]:
+    """(to_world, to_object) Dr.Jit transforms of a (4, 4) object-to-world matrix (the
+    inverse taken in float64)."""
+    m = np.asarray(matrix, np.float64)
+    make = lambda a: mi.Transform4f(mi.ScalarTransform4f(mi.ScalarMatrix4f(a.astype(np.float32))))
+    return make(m), make(np.linalg.inv(m))
 
 
 @dataclass
@@ -415,13 +434,16 @@ def orthogonal_counts(bm: BaseMesh, scale: float, n: int, ratio_scaling: bool) -
     With ``ratio_scaling`` (§3.4) the orthogonal slices get the spacing of the aligned ones
     (scale / n): n x edge length / max displacement per base polygon edge, so edge 2 and
     displacement 0.5 give 4x the slices.  Without it, n slices per base polygon edge.
+    Lengths are measured in object space: ``to_world`` (a non-uniform scale too) moves the
+    slices with the surface but never changes how many there are.
     """
+    obj = bm.in_object_space()
     counts = []
-    for length in bm.extent():
-        if ratio_scaling:
-            c = math.ceil(n * length / bm.world_scale(scale) - 1e-9)
+    for length in obj.extent():
+        if ratio_scaling:   # relative tolerance: float32 matrices give 80.000001 for 80
+            c = math.ceil(n * length / obj.world_scale(scale) * (1 - 1e-6))
         else:
-            c = n * max(1, round(length / bm.mean_edge()))
+            c = n * max(1, round(length / obj.mean_edge()))
         counts.append(int(min(max(c, 1), 1 << 20)))
     return counts[0], counts[1]
 
