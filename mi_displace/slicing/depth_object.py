@@ -98,15 +98,17 @@ class DepthImages:
 # making the images
 
 def face_sensor(center, half: float, face: int, resolution: int) -> mi.Sensor:
-    """The orthographic sensor of face ``face`` (looking into the cube)."""
+    """The orthographic sensor of face ``face`` (looking into the cube) from 2.5 ``half``
+    off the centre; its clip planes are sized from the cube (0.5 and 5 ``half``), so a
+    model in millimetres or kilometres is captured alike."""
     axis, sign = FACES[face]
     e = np.eye(3)
     origin = np.asarray(center, np.float64) + sign * 2.5 * half * e[axis]
     up = e[(axis + 2) % 3]
     to_world = mi.ScalarTransform4f().look_at(origin=origin.tolist(), target=list(map(float, center)),
                                                up=up.tolist()) @ mi.ScalarTransform4f().scale([half, half, 1.0])
-    return mi.load_dict({"type": "orthographic", "to_world": to_world, "near_clip": 1e-3,
-                         "far_clip": 1e3,
+    return mi.load_dict({"type": "orthographic", "to_world": to_world, "near_clip": 0.5 * half,
+                         "far_clip": 5.0 * half,
                          "film": {"type": "hdrfilm", "width": resolution, "height": resolution}})
 
 

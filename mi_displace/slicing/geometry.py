@@ -333,8 +333,8 @@ def volume_walls(bm: BaseMesh, scale: float) -> SliceMesh:
     """The boundary of the displacement volume, slightly outside the slices: top at
     h = 1 + ε, bottom at h = -ε (wound inwards), quads on the open edges; wall flag 1 and
     outward normals, so a ray enters where it meets a wall's front face."""
-    lo_box, hi_box = bm.bbox(scale)
-    reach = 1 + float(np.max(np.abs(np.concatenate([lo_box, hi_box]))))
+    lo_box, hi_box = bm.bbox(scale)   # the reach of step_past's offset (relative: any size)
+    reach = float(np.linalg.norm(hi_box - lo_box) + np.max(np.abs(np.concatenate([lo_box, hi_box]))))
     eps = max(WALL_EPS, 4 * SPAWN_EPS * reach / bm.world_scale(scale))
     top = SliceMesh(*_vertex_data(bm, scale * (1 + eps), 1.0, 1.0), bm.faces)
     bottom = SliceMesh(*_vertex_data(bm, -scale * eps, 0.0, 1.0, 1.0), bm.faces[:, ::-1])
@@ -376,7 +376,8 @@ class SliceScene:
     interpolated from preliminary intersections (cheaper than Mitsuba's full interaction).
 
     Attributes: scene, mesh; faces (3 x UInt32 per face); uv, ramp, bn, su, sv (per vertex);
-    flags (per face: 1 wall, 2 bottom wall); fn (per-face unit geometric normal).
+    flags (per face: 1 wall, 2 bottom wall); fn (per-face unit geometric normal); length
+    (the bounding-box diagonal [world units], the size the walks' offsets are relative to).
     """
 
     def __init__(self, sm: SliceMesh, name: str):
@@ -395,6 +396,7 @@ class SliceScene:
         fn = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
         self.fn = f32(fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-30))
         self.triangles = len(sm.faces)
+        self.length = float(np.linalg.norm(sm.positions.max(0) - sm.positions.min(0)))
 
     def geometry(self) -> zbuffer.Geometry:
         """The triangles for the z-buffer (:mod:`mi_displace.slicing.rasterised`), built once."""
