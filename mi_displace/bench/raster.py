@@ -445,9 +445,10 @@ def consistency(res: int = 256) -> list[dict]:
         rt_img, rt_s = _render(sc, raster.Options())
         zb_img, zb_s = _render(sc, raster.Options(visibility="zbuffer"))
         ray, _, _, _ = raster.pixel_rays(sensor, aa)
-        si_rt, _ = raster.first_opaque_hit(sc, ray, sc.integrator().max_layers, mi.Bool(True))
+        layers = sc.integrator().max_layers or raster.layer_limit(sc.shapes())
+        si_rt, _, _ = raster.first_opaque_hit(sc, ray, layers, mi.Bool(True))
         geom = zbuffer.gather_geometry(sc.shapes())
-        si_zb = raster.zbuffer_hit(sensor, geom, ray, aa)
+        si_zb, _ = raster.zbuffer_hit(sensor, geom, ray, aa, layers)
         same = (si_rt.is_valid() == si_zb.is_valid()) & (
             ~si_rt.is_valid() | ((si_rt.prim_index == si_zb.prim_index)
                                  & (si_rt.shape == si_zb.shape)))

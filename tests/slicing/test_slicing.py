@@ -299,3 +299,25 @@ def test_traverse_edits_rebuild_the_slices(variant, helpers):
     params["obj.slices"] = 2.5
     with pytest.raises(Exception, match="integer"):
         params.update()
+
+
+@pytest.mark.parametrize("visibility", ["raytrace", "zbuffer"])
+def test_raster_sees_through_stacked_volumes(variant, helpers, visibility):
+    """Five stacked slicing volumes that draw nothing (zero heights, ramp α-test) over a
+    floor: a ray crosses ten volume walls, more than the old fixed limit of 8 layers.  Under
+    `raster` (ambient light: walls cast no shadow) the floor is what the floor alone gives."""
+    def floor_scene(count):
+        shapes = {f"s{k}": {**helpers.plane(height={"type": "uniform", "value": 0.0}, alpha="ramp",
+                                            slices=4, scale=0.05, direction="a", draw_base=False),
+                            "to_world": mi.ScalarTransform4f().translate([0, 0, 0.2 * k])}
+                  for k in range(count)}
+        return mi.load_dict({
+            "type": "scene", "integrator": {"type": "raster", "visibility": visibility}, **shapes,
+            "floor": {"type": "rectangle", "bsdf": helpers.MATERIAL,
+                      "to_world": mi.ScalarTransform4f().translate([0, 0, -0.5]).scale(3)},
+            "amb": {"type": "constant", "radiance": 1.0},
+            "sensor": helpers.look([0.3, -0.5, 4], [0, 0, 0], res=48)})
+    bare = np.array(mi.render(floor_scene(0)))
+    img = np.array(mi.render(floor_scene(5)))
+    assert np.all(np.isfinite(img))
+    assert np.abs(img - bare).max() < 1e-4
