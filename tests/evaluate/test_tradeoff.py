@@ -60,6 +60,18 @@ def test_sweep_measures_every_point(sweep):
     assert (out / "tradeoff.png").stat().st_size > 10_000
 
 
+def test_a_progress_line_per_point(sweep, caplog):
+    """Scripts and notebooks see each point through the mi_displace logger."""
+    import logging
+
+    _, root = sweep
+    with caplog.at_level(logging.INFO, logger="mi_displace"):
+        tr.tradeoff(SCENE, [tr.parse_knob("resolution=6,24,96")], out_dir=root / "again",
+                    cache_dir=root / "cache", progress=None, **SWEEP)
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("point ")]
+    assert lines == [f"point {i}/3: resolution={r}: cached" for i, r in ((1, 6), (2, 24), (3, 96))]
+
+
 def test_pareto_front_brute_force(sweep):
     points = sweep[0]["points"]
     for p in points:
