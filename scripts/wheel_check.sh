@@ -4,6 +4,7 @@
 # cache is reused), and from a temporary directory run
 #   mi-displace --version
 #   scripts/wheel_check_load.py: mi.load_file + a 16x16 render of a packaged scene of every plugin
+#   tests/core/test_resources.py against the installed package (after installing its [test] extra)
 #   mi-displace showcase --quick on two packaged scenes copied into a folder of their own
 #   mi-displace bench NAME --quick for each name in BENCHES
 # printing the seconds of each step.  Needs python3 with venv and libLLVM >= 17 (setup.sh).
@@ -54,6 +55,12 @@ step "mi-displace --version"
 step "load + render a scene of every plugin"
 cp "$ROOT/scripts/wheel_check_load.py" "$RUN/"
 "$BIN/python" "$RUN/wheel_check_load.py"
+
+step "[test] extra + test_resources.py on the wheel"
+"$BIN/python" -m pip install -q "$WHEEL[test]" 2> >(quiet_pip >&2)
+mkdir -p "$RUN/tests"
+cp "$ROOT/tests/conftest.py" "$ROOT/tests/core/test_resources.py" "$RUN/tests/"
+MI_DISPLACE_TEST_VARIANTS=llvm_ad_rgb "$BIN/python" -m pytest -q -p no:cacheprovider "$RUN/tests"
 
 step "showcase --quick (2 scenes, copied)"
 mkdir -p "$RUN/scenes"
