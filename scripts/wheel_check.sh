@@ -19,7 +19,7 @@ SHOWCASE_SCENES=${SHOWCASE_SCENES:-"displaced_sphere.xml bump_vs_displaced.xml"}
 #   bake bake_blender cluster core ddm dicing grad grad_bunny raster slicing vdm volume
 BENCHES=${BENCHES:-""}
 
-if [ -n "${1:-}" ]; then WORK=$1; mkdir -p "$WORK"; else
+if [ -n "${1:-}" ]; then mkdir -p "$1"; WORK=$(cd "$1" && pwd); else
   WORK=$(mktemp -d); trap 'rm -rf "$WORK"' EXIT; fi
 case "$WORK" in "$ROOT"|"$ROOT"/*) echo "wheel_check: $WORK is inside the checkout" >&2; exit 2;; esac
 
