@@ -43,10 +43,10 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.bench._timing import median_time
+from mi_displace.core.resources import data_path, scene_path
 from mi_displace.render import raster
 
-ROOT = Path(__file__).resolve().parents[2]
-SPOT = str(ROOT / "data" / "spot" / "spot_triangulated.obj")
+SPOT = str(data_path("spot", "spot_triangulated.obj"))
 RES = 512
 SUN_DIRECTION = (-1.0, 1.0, -1.0)
 ALBEDO = (0.7, 0.6, 0.5)
@@ -406,7 +406,7 @@ def _load(name: str, res: int) -> mi.Scene:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return mi.load_file(str(ROOT / "scenes" / f"{name}.xml"), mode="approximation",
+        return mi.load_file(str(scene_path(f"{name}.xml")), mode="approximation",
                             integrator="raster", res=res)
 
 

@@ -33,17 +33,16 @@ import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from mi_displace.bench._timing import print_record
+from mi_displace.core.resources import data_path, scene_path
 
-ROOT = Path(__file__).resolve().parents[2]
-WALNUT = ROOT / "data" / "volumes" / "walnut_128x96x114_uint16.raw"
-SCENE = ROOT / "scenes" / "volume_walnut_peel.xml"
+WALNUT = data_path("volumes", "walnut_128x96x114_uint16.raw")
+SCENE = scene_path("volume_walnut_peel.xml")
 RES, SIZE, ISO = 256, 512, 0.3
 EYE, TARGET, FOV = (0.9, -2.3, 1.3), (0.0, 0.0, 0.0), 34.0
 TARGETS = {"undisplaced_vs_vtk": 2.0, "displacement_overhead": 1.6}

@@ -76,7 +76,8 @@ def ensure_registered() -> None:
 
 
 def init(variant: str | None = None) -> str:
-    """Set the Mitsuba variant and register every mi_displace plugin for it.
+    """Set the Mitsuba variant, register every mi_displace plugin for it and put the packaged
+    scenes on Mitsuba's file resolver (:func:`mi_displace.core.resources.add_to_file_resolver`).
 
     Call again after any ``mi.set_variant``: plugin classes derive from the variant's
     own ``mi.Mesh`` / ``mi.Texture`` / ... and are redefined for it.
@@ -92,6 +93,8 @@ def init(variant: str | None = None) -> str:
                          f"(use {DEFAULT_VARIANT} on the CPU)")
     mi.set_variant(variant)
     from mi_displace import plugins
+    from mi_displace.core.resources import add_to_file_resolver
 
     plugins.register_all()
+    add_to_file_resolver()
     return variant

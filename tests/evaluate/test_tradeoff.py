@@ -9,16 +9,16 @@ cluster must give bit-identical raster images.
 import json
 import math
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import mi_displace
+from mi_displace.core.resources import scene_path
 from mi_displace.evaluate import atlas as atlas_mod
 from mi_displace.evaluate import tradeoff as tr
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "tradeoff"
+DATA = scene_path("tradeoff")
 SCENE = DATA / "bumpy_sphere.xml"
 SWEEP = dict(max_spp=128, warm_repeats=3)
 
