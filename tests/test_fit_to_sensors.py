@@ -58,5 +58,7 @@ def test_load_file_plus_fit_equals_the_cli_loader(variant, plugin, tmp_path):
     img_a = np.asarray(mi.render(ours, seed=3))
     img_b = np.asarray(mi.render(theirs, seed=3))
     assert np.isfinite(img_a).all() and img_a.mean() > 0
-    np.testing.assert_array_equal(img_a, img_b)
+    # the same geometry; two acceleration structures built on worker threads may split
+    # ties differently, so hit points agree to float rounding, not bit for bit
+    np.testing.assert_allclose(img_a, img_b, rtol=0, atol=1e-5)
     assert mi_displace.fit_to_sensors(theirs) == []               # fitted: nothing to redo
