@@ -445,7 +445,7 @@ def consistency(res: int = 256) -> list[dict]:
         rt_img, rt_s = _render(sc, raster.Options())
         zb_img, zb_s = _render(sc, raster.Options(visibility="zbuffer"))
         ray, _, _, _ = raster.pixel_rays(sensor, aa)
-        layers = sc.integrator().max_layers or raster.layer_limit(sc.shapes())
+        layers = sc.integrator().max_layers or raster.layer_limit(sc.shapes(), sc)
         si_rt, _, _ = raster.first_opaque_hit(sc, ray, layers, mi.Bool(True))
         geom = zbuffer.gather_geometry(sc.shapes())
         si_zb, _ = raster.zbuffer_hit(sensor, geom, ray, aa, layers)

@@ -92,17 +92,32 @@ def spawn_ray_to(si: mi.SurfaceInteraction3f, target: mi.Point3f,
     return ray
 
 
-def layer_limit(shapes) -> int:
-    """The most alpha-test pass-throughs a ray can need among ``shapes``: 1 + the triangles
-    of every mesh whose BSDF has a null component (a ray crosses a plane triangle at most
-    once, :func:`spawn_offset` moves it past) + 2 for every other such shape (a quadric or
-    a plane is crossed at most twice).  The ``max_layers`` that never cuts a ray short;
-    the loops run only as long as the longest chain of pass-throughs actually met."""
-    limit = 1
+def _pass_through_count(shapes) -> int:
+    """Surfaces a ray may pass through among ``shapes`` (BSDF with a null component): the
+    triangles of a mesh (a ray crosses a plane triangle at most once, :func:`spawn_offset`
+    moves it past), 2 for any other shape (a quadric or a plane is crossed at most twice)."""
+    count = 0
     for shape in shapes:   # a handful of shapes
         bsdf = shape.bsdf()
         if bsdf is not None and mi.has_flag(bsdf.flags(), mi.BSDFFlags.Null):
-            limit += int(shape.face_count()) if shape.is_mesh() else 2
+            count += int(shape.face_count()) if shape.is_mesh() else 2
+    return count
+
+
+def layer_limit(shapes, scene: mi.Scene | None = None) -> int:
+    """The most alpha-test pass-throughs a ray can need among ``shapes``: 1 + their
+    pass-through surfaces, and with shape groups (their shapes are reachable only through
+    ``scene``'s parameters, and Mitsuba 3.9.1 does not tell an instance from Python) those
+    of every grouped shape once per top-level shape, a bound for any number of instances.
+    The ``max_layers`` that never cuts a ray short; the loops run only as long as the
+    longest chain of pass-throughs actually met."""
+    shapes = list(shapes)
+    limit = 1 + _pass_through_count(shapes)
+    if scene is not None:
+        top = {id(s) for s in shapes}
+        grouped = {id(node): node for _, _, node, _ in mi.traverse(scene).properties.values()
+                   if isinstance(node, mi.Shape) and id(node) not in top}
+        limit += len(shapes) * _pass_through_count(grouped.values())
     return limit
 
 
@@ -131,7 +146,7 @@ def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int | None,
         the limit stopped it on a surface that passes the alpha test (``exhausted``).
     """
     if max_layers is None:
-        max_layers = layer_limit(scene.shapes())
+        max_layers = layer_limit(scene.shapes(), scene)
 
     def cond(ray, si, layer, going, exhausted):
         return going
@@ -417,7 +432,7 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int | No
     every = list(scene.shapes() if shapes is None else shapes)
     if options.visibility == "zbuffer" or options.shadows == "map":
         geom = zbuffer.gather_geometry(every)
-    limit = layer_limit(every) if max_layers is None else max_layers
+    limit = layer_limit(every, scene if shapes is None else None) if max_layers is None else max_layers
     ray, weight, w, h = pixel_rays(sensor, aa)
     active = mi.Bool(True)
     drawn = [s for s in every if hasattr(s, "raster_begin")]
