@@ -4,23 +4,25 @@ local illumination of the first visible surface.
 For each primary ray: an alpha test passes through surfaces whose BSDF's null
 transmission is >= 1/2 (cut-outs, silhouettes of per-pixel techniques), then the first
 opaque surface is shaded with its BSDF's ``eval`` (which includes the cosine) under every
-delta light (point, spot, directional) with a hard shadow ray, plus an unoccluded
-ambient term albedo x L_amb for each ``constant`` emitter.  Rays that miss see the
-environment, rays that hit an area light see its radiance.  Area and environment lights
-do not illuminate (they are not delta lights).  Shadow rays are blocked by every surface,
-null BSDFs included, exactly as the emitter sampling of Mitsuba's ``path``; a technique's
-BSDF can add its own shadow test inside ``eval`` (VDM does).
+delta light (point, spot, directional, projector) with a hard shadow ray, under a fixed set
+of ``area_samples`` points on each area light (:mod:`.lights`, a shadow ray per point),
+plus an unoccluded ambient term per ``constant`` or ``envmap`` emitter.  Rays that miss see
+the environment, rays that hit an area light see its radiance.  Any other emitter is
+refused before the frame (:func:`.lights.emitter_problem`).  Shadow rays are blocked by
+every surface, null BSDFs included, exactly as the emitter sampling of Mitsuba's ``path``;
+a technique's BSDF can add its own shadow test inside ``eval`` (VDM does).
 
 Shadow rays and alpha-test continuations leave the surface by :func:`spawn_offset`, a
 float32 error bound of the hit point (a fixed number of ulps of the hit triangle's largest
 coordinate), not Mitsuba's ``(1 + max|p|) x RayEpsilon``: that offset is absolute near
 the origin and grows with the distance from it, so small or distant models lost their
-contact shadows (issue 12 item 8, measured in ``docs/raster.md``).
+contact shadows (measured in ``docs/raster.md``).
 
 Visibility and shadows are chosen per scene (:class:`Options`): ray tracing through
 Mitsuba's acceleration structure (the default) or the z-buffer of :mod:`.zbuffer`, shadow
-rays or the shadow maps of :mod:`.shadow_map`; with z-buffer and shadow maps no
-acceleration structure is needed (:func:`render`'s ``shapes``).
+rays or the shadow maps of :mod:`.shadow_map` (delta lights; area lights keep their
+shadow rays); with z-buffer and shadow maps no acceleration structure is needed
+(:func:`render`'s ``shapes``).
 
 A shape may draw itself GPU-style before the frame: :func:`render` calls
 ``raster_begin(sensor, aa)`` on every shape that has it before visibility and
@@ -36,18 +38,10 @@ from dataclasses import dataclass
 import drjit as dr
 import mitsuba as mi
 
-from mi_displace.render import shadow_map, zbuffer
+from mi_displace.render import lights, shadow_map, zbuffer
 
 VISIBILITY = ("raytrace", "zbuffer")
 SHADOWS = ("ray", "map", "none")
-
-
-def _is_delta(emitter: mi.Emitter) -> bool:
-    return mi.has_flag(emitter.flags(), mi.EmitterFlags.Delta)
-
-
-def _is_ambient(emitter: mi.Emitter) -> bool:
-    return emitter.class_name() == "ConstantBackgroundEmitter"
 
 
 #: Half-ulps (2^-24 relative) of the hit triangle's largest coordinate by which a secondary
@@ -135,12 +129,15 @@ class Options:
             :mod:`.shadow_map`) or ``"none"`` (delta lights unshadowed).
         shadow_resolution: shadow-map texels per side (cube faces for point lights).
         shadow_bias, shadow_normal_offset: shadow-map depth bias and normal offset, in texels.
+        area_samples: fixed light points per area emitter (:mod:`.lights`), each with a
+            shadow ray unless ``shadows="none"``.
     """
     visibility: str = "raytrace"
     shadows: str = "ray"
     shadow_resolution: int = 2048
     shadow_bias: float = 0.5
     shadow_normal_offset: float = 0.5
+    area_samples: int = 16
 
     def check(self) -> "Options":
         """Raises ValueError naming the first bad field."""
@@ -156,18 +153,24 @@ class Options:
             value = getattr(self, name)
             if not (value >= 0 and value < float("inf")):
                 raise ValueError(f"raster: {name!r} must be finite and >= 0, got {value!r}")
+        if not (isinstance(self.area_samples, int)
+                and 1 <= self.area_samples <= lights.MAX_AREA_SAMPLES):
+            raise ValueError(f"raster: 'area_samples' must be an integer in "
+                             f"[1, {lights.MAX_AREA_SAMPLES}], got {self.area_samples!r}")
         return self
 
 
 def shade_hit(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f, active: mi.Bool,
-              shadow_test) -> mi.Color3f:
+              shadow_test, light_data: lights.Lights, area_shadows: bool) -> mi.Color3f:
     """Local illumination of the visible interactions ``si`` (module doc).
 
-    ``shadow_test(emitter, si, ds, lit) -> Bool`` says which points see a delta light.
-    Every BSDF query of a sample (``eval`` per delta light, ``eval_diffuse_reflectance``
-    per ambient light) runs in one dispatch over the BSDFs, so a BSDF that prepares its
-    interaction once (the mesostructure BSDFs' ``_prepare``: a slice walk, a VDM
-    footprint) does it once per sample, not once per query.
+    ``shadow_test(emitter, si, ds, lit) -> Bool`` says which points see a delta light;
+    ``area_shadows`` whether each area-light point gets a shadow ray.
+    Every BSDF query of a sample for the delta and ambient lights (``eval`` per delta
+    light, ``eval_diffuse_reflectance``) runs in one dispatch over the BSDFs, so a BSDF
+    that prepares its interaction once (the mesostructure BSDFs' ``_prepare``: a slice
+    walk, a VDM footprint) does it once per sample, not once per query; the area-light
+    points are a loop of Mitsuba's own ``eval`` calls (one preparation per point).
     """
     hit = active & si.is_valid()
     L = dr.zeros(mi.Color3f, dr.width(ray))
@@ -175,14 +178,14 @@ def shade_hit(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f, activ
     emitter = si.emitter(scene, active)
     L += dr.select(active, mi.Color3f(emitter.eval(si, active)), 0.0)
     ctx = mi.BSDFContext()
-    lights = []   # (weight, local direction to the light, lit) per delta light
+    deltas = []   # (weight, local direction to the light, lit) per delta light
     for e in scene.emitters():
-        if _is_delta(e):
+        if lights.is_delta(e):
             ds, weight = e.sample_direction(si, mi.Point2f(0.5), hit)
             lit = hit & (ds.pdf > 0)
             lit &= shadow_test(e, si, ds, lit)
-            lights.append((weight, si.to_local(ds.d), lit))
-    ambient = any(_is_ambient(e) for e in scene.emitters())
+            deltas.append((weight, si.to_local(ds.d), lit))
+    ambient = any(lights.is_constant(e) or lights.is_envmap(e) for e in scene.emitters())
 
     def queries(bsdf, si, wos, lits, hit):
         if bsdf is None:   # no BSDF exists (a scene without shapes): only the output types
@@ -200,15 +203,45 @@ def shade_hit(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f, activ
              for wo, lit in zip(wos, lits)]
         return f, [albedo] if ambient else []
 
-    f, albedo = dr.dispatch(si.bsdf(ray), queries, si, [wo for _, wo, _ in lights],
-                            [lit for *_, lit in lights], hit)
-    delta = iter(zip(f, lights))
+    bsdf = si.bsdf(ray)
+    f, albedo = dr.dispatch(bsdf, queries, si, [wo for _, wo, _ in deltas],
+                            [lit for *_, lit in deltas], hit)
+    delta = iter(zip(f, deltas))
+    if ambient:   # n on the viewer's side, for the envmaps' irradiance
+        n = dr.mulsign(si.sh_frame.n, dr.dot(si.sh_frame.n, -ray.d))
     for e in scene.emitters():   # summed in the scene's emitter order
-        if _is_delta(e):
+        if lights.is_delta(e):
             value, (weight, _, lit) = next(delta)
             L += dr.select(lit, value * weight, 0.0)
-        elif _is_ambient(e):
+        elif lights.is_constant(e):
             L += dr.select(hit, albedo[0] * e.eval(si, hit), 0.0)
+        elif lights.is_envmap(e):
+            L += dr.select(hit, albedo[0] * lights.sh_irradiance(light_data.envmaps[id(e)], n),
+                           0.0)
+    if light_data.area.count:
+        L += area_light(scene, si, bsdf, hit, light_data.area, area_shadows)
+    return L
+
+
+def area_light(scene: mi.Scene, si: mi.SurfaceInteraction3f, bsdf: mi.BSDFPtr, hit: mi.Bool,
+               samples: lights.AreaSamples, shadows: bool) -> mi.Color3f:
+    """Reflected radiance of the visible points ``si`` lit by the fixed area-light points
+    ``samples``: Σ_k f(wo_k) × weight_k × visible_k, a symbolic loop over the K points."""
+    ctx = mi.BSDFContext()
+    count = samples.count
+
+    def body(k, L):
+        ds, weight = lights.area_sample_toward(samples, k, si, hit)
+        lit = hit & (dr.max(weight) > 0)
+        if shadows:
+            lit &= ~scene.ray_test(spawn_ray_to(si, ds.p, lit), lit)
+        f = bsdf.eval(ctx, si, si.to_local(ds.d), lit)
+        return k + 1, L + dr.select(lit, f * weight, 0.0)
+
+    n = dr.width(hit)
+    _, L = dr.while_loop(state=(dr.zeros(mi.UInt32, n), dr.zeros(mi.Color3f, n)),
+                         cond=lambda k, L: k < count, body=body, labels=("k", "L"),
+                         label="raster_area_lights")
     return L
 
 
@@ -225,7 +258,7 @@ def map_shadows(scene: mi.Scene, geom: zbuffer.Geometry, options: Options):
         return no_shadows   # nothing casts a shadow (and the scene has no bounds)
     maps = {}
     for e in scene.emitters():
-        if _is_delta(e):
+        if lights.is_delta(e):
             maps[id(e)] = shadow_map.build(e, geom, options.shadow_resolution,
                                            options.shadow_bias, options.shadow_normal_offset)
 
@@ -264,19 +297,25 @@ def light_masks(scene: mi.Scene, sensor: mi.Sensor, options: Options,
     test = shadow_test_of(scene, geom, options)
     masks = []
     for e in scene.emitters():
-        if _is_delta(e):
+        if lights.is_delta(e):
             ds, _ = e.sample_direction(si, mi.Point2f(0.5), hit)
             lit = hit & (ds.pdf > 0)
             masks.append(lit & test(e, si, ds, lit))
     return hit, masks
 
 
-def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8,
-          active: mi.Bool = True) -> mi.Color3f:
-    """Radiance [scene units] along primary rays: ray-traced visibility and shadows."""
+def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8, active: mi.Bool = True,
+          area_samples: int = Options.area_samples) -> mi.Color3f:
+    """Radiance [scene units] along primary rays: ray-traced visibility and shadows.
+
+    Raises:
+        ValueError: an emitter raster cannot draw (:func:`.lights.emitter_problem`).
+    """
+    lights.check(scene)
+    light_data = lights.prepare(scene, area_samples)
     active = mi.Bool(active)
     si, ray = first_opaque_hit(scene, ray, max_layers, active)
-    return shade_hit(scene, si, ray, active, ray_shadows(scene))
+    return shade_hit(scene, si, ray, active, ray_shadows(scene), light_data, True)
 
 
 def pixel_rays(sensor: mi.Sensor, aa: int) -> tuple[mi.Ray3f, mi.Color3f, int, int]:
@@ -356,17 +395,23 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
             shapes at all, so Mitsuba builds no acceleration structure over them.
 
     Raises:
-        ValueError: bad options, a film whose sample buffers exceed the memory budget
-            (before anything is allocated), or ``shapes`` given to a method that traces
-            rays through the scene.
+        ValueError: bad options, an emitter raster cannot draw, a film whose sample
+            buffers exceed the memory budget (before anything is allocated), or ``shapes``
+            given to a method that traces rays through the scene (area lights always do,
+            unless ``shadows="none"``).
     """
     options = (options or Options()).check()
+    lights.check(scene)
     w, h = sensor.film().crop_size()
     zbuffer.check_memory(int(w) * int(h) * aa * aa, f"a {w}x{h} film at aa={aa}")
-    traces = options.visibility == "raytrace" or options.shadows == "ray"
+    area_shadows = options.shadows != "none"
+    traces = (options.visibility == "raytrace" or options.shadows == "ray"
+              or (area_shadows and any(lights.is_area(e) for e in scene.emitters())))
     if shapes is not None and traces:
         raise ValueError("raster: explicit 'shapes' need visibility='zbuffer' and "
-                         "shadows='map' or 'none' (rays are traced through the scene's shapes)")
+                         "shadows='map' or 'none', and shadows='none' with area lights "
+                         "(rays are traced through the scene's shapes)")
+    light_data = lights.prepare(scene, options.area_samples)
     geom = None
     if options.visibility == "zbuffer" or options.shadows == "map":
         geom = zbuffer.gather_geometry(scene.shapes() if shapes is None else shapes)
@@ -380,7 +425,8 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
             si, ray = first_opaque_hit(scene, ray, max_layers, active)
         else:
             si = zbuffer_hit(sensor, geom, ray, aa, max_layers)
-        L = shade_hit(scene, si, ray, active, shadow_test_of(scene, geom, options)) * weight
+        L = shade_hit(scene, si, ray, active, shadow_test_of(scene, geom, options),
+                      light_data, area_shadows) * weight
         dr.eval(L)
     finally:
         for shape in drawn:
