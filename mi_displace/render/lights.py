@@ -149,8 +149,9 @@ def envmap_sh(emitter: mi.Emitter) -> list:
     c_lm = Â_l L_lm / π, so that Σ c_lm Y_lm(n) is the radiance a white Lambertian surface
     with normal n reflects (eq. 13 divided by π).
 
-    L_lm = ∫ L(ω) Y_lm(ω) dω by the midpoint rule over a latitude-longitude grid with exact
-    cell solid angles (a constant environment is reproduced to float rounding), 2 cells per
+    L_lm = ∫ L(ω) Y_lm(ω) dω by the midpoint rule (in z = cos θ and φ) over a
+    latitude-longitude grid with exact cell solid angles (a constant environment is
+    reproduced to float rounding), 2 cells per
     texel of the emitter's bitmap in each direction (64 × 128 at least, 1024 × 2048 at most).
     """
     data = mi.traverse(emitter).get("data") if "data" in mi.traverse(emitter).keys() else None
@@ -161,9 +162,10 @@ def envmap_sh(emitter: mi.Emitter) -> list:
     i, j = mi.Float(idx // n_phi), mi.Float(idx % n_phi)
     cos0, cos1 = dr.cos(i * (dr.pi / n_theta)), dr.cos((i + 1) * (dr.pi / n_theta))
     d_omega = (cos0 - cos1) * (2 * dr.pi / n_phi)
-    theta = (i + 0.5) * (dr.pi / n_theta)
+    z = 0.5 * (cos0 + cos1)   # the cell's mid-height: band 0 and 1 integrate exactly
+    sin_theta = dr.safe_sqrt(1.0 - z * z)
     phi = (j + 0.5) * (2 * dr.pi / n_phi)
-    d = mi.Vector3f(dr.sin(theta) * dr.cos(phi), dr.sin(theta) * dr.sin(phi), dr.cos(theta))
+    d = mi.Vector3f(sin_theta * dr.cos(phi), sin_theta * dr.sin(phi), z)
     si = dr.zeros(mi.SurfaceInteraction3f, dr.width(idx))
     si.wi = -d
     L = mi.Color3f(emitter.eval(si)) * d_omega
