@@ -87,12 +87,16 @@ def emitting(kind):
             "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [8, 8, 6]}}}
 
 
-@pytest.mark.parametrize("kind", ["sphere", "mesh"])
-def test_area_light_on_sphere_and_mesh_matches_path(variant, kind):
+@pytest.mark.parametrize("kind, points", [("sphere", 32), ("mesh", 128)])
+def test_area_light_on_sphere_and_mesh_matches_path(variant, kind, points):
+    """A sphere light (32 points) and a small rotated cube light (a 12-triangle mesh, 128
+    points: about 10 per triangle) in the Cornell box: within FLIP 0.035 of path and the
+    mean within 2 % (measured against 2 x 256 spp: sphere FLIP 0.020, mean +0.2 %; cube
+    FLIP 0.025, mean +1.1 %)."""
     light = emitting(kind)
     reference, noise_floor = path_reference(light)
-    r = render(cornell_box({"type": "raster", "aa": 4, "area_samples": 32}, light=light))
-    assert mean_flip(reference, r) < max(2 * noise_floor, 0.03)
+    r = render(cornell_box({"type": "raster", "aa": 4, "area_samples": points}, light=light))
+    assert mean_flip(reference, r) < 0.035
     assert np.abs(reference - r).mean() < 0.005
     assert abs(r.mean() / reference.mean() - 1) < 0.02
     assert r.mean() > 0.02   # really lit
