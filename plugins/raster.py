@@ -11,6 +11,7 @@
         <float name="shadow_bias" value="0.5"/>        <!-- shadow-map depth bias, texels -->
         <float name="shadow_normal_offset" value="0.5"/> <!-- lookup offset x sin(theta), texels -->
         <integer name="area_samples" value="16"/>      <!-- fixed points per area light -->
+        <integer name="area_shadow_resolution" value="256"/>  <!-- per point, shadows="map" -->
     </integrator>
 
 ``mi.render(scene)`` returns a (height, width, 3) image; ``spp`` and ``seed`` are ignored
@@ -47,6 +48,8 @@ class Raster(mi.SamplingIntegrator):
             shadow_bias=float(props.get("shadow_bias", defaults.shadow_bias)),
             shadow_normal_offset=float(props.get("shadow_normal_offset", defaults.shadow_normal_offset)),
             area_samples=int(props.get("area_samples", defaults.area_samples)),
+            area_shadow_resolution=int(props.get("area_shadow_resolution",
+                                                 defaults.area_shadow_resolution)),
         ).check()
         self.shapes = None
 

@@ -5,7 +5,7 @@ For each primary ray: an alpha test passes through surfaces whose BSDF's null
 transmission is >= 1/2 (cut-outs, silhouettes of per-pixel techniques), then the first
 opaque surface is shaded with its BSDF's ``eval`` (which includes the cosine) under every
 delta light (point, spot, directional, projector) with a hard shadow ray, under a fixed set
-of ``area_samples`` points on each area light (:mod:`.lights`, a shadow ray per point),
+of ``area_samples`` points on each area light (:mod:`.lights`, a hard shadow per point),
 plus an unoccluded ambient term per ``constant`` or ``envmap`` emitter.  Rays that miss see
 the environment, rays that hit an area light see its radiance.  Any other emitter is
 refused before the frame (:func:`.lights.emitter_problem`).  Shadow rays are blocked by
@@ -20,8 +20,8 @@ contact shadows (measured in ``docs/raster.md``).
 
 Visibility and shadows are chosen per scene (:class:`Options`): ray tracing through
 Mitsuba's acceleration structure (the default) or the z-buffer of :mod:`.zbuffer`, shadow
-rays or the shadow maps of :mod:`.shadow_map` (delta lights; area lights keep their
-shadow rays); with z-buffer and shadow maps no acceleration structure is needed
+rays or the shadow maps of :mod:`.shadow_map` (a cube map per area-light point); with
+z-buffer and shadow maps no acceleration structure is needed
 (:func:`render`'s ``shapes``).
 
 A shape may draw itself GPU-style before the frame: :func:`render` calls
@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from mi_displace.render import lights, shadow_map, zbuffer
 
@@ -130,7 +131,8 @@ class Options:
         shadow_resolution: shadow-map texels per side (cube faces for point lights).
         shadow_bias, shadow_normal_offset: shadow-map depth bias and normal offset, in texels.
         area_samples: fixed light points per area emitter (:mod:`.lights`), each with a
-            shadow ray unless ``shadows="none"``.
+            shadow ray (``shadows="ray"``) or a cube shadow map (``"map"``).
+        area_shadow_resolution: texels per side of each area-light point's cube-map faces.
     """
     visibility: str = "raytrace"
     shadows: str = "ray"
@@ -138,6 +140,7 @@ class Options:
     shadow_bias: float = 0.5
     shadow_normal_offset: float = 0.5
     area_samples: int = 16
+    area_shadow_resolution: int = 256
 
     def check(self) -> "Options":
         """Raises ValueError naming the first bad field."""
@@ -146,9 +149,11 @@ class Options:
                              f"got {self.visibility!r}")
         if self.shadows not in SHADOWS:
             raise ValueError(f"raster: 'shadows' must be one of {SHADOWS}, got {self.shadows!r}")
-        if not (isinstance(self.shadow_resolution, int) and 1 <= self.shadow_resolution <= 16384):
-            raise ValueError(f"raster: 'shadow_resolution' must be an integer in [1, 16384], "
-                             f"got {self.shadow_resolution!r}")
+        for name in ("shadow_resolution", "area_shadow_resolution"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and 1 <= value <= 16384):
+                raise ValueError(f"raster: {name!r} must be an integer in [1, 16384], "
+                                 f"got {value!r}")
         for name in ("shadow_bias", "shadow_normal_offset"):
             value = getattr(self, name)
             if not (value >= 0 and value < float("inf")):
@@ -161,11 +166,12 @@ class Options:
 
 
 def shade_hit(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f, active: mi.Bool,
-              shadow_test, light_data: lights.Lights, area_shadows: bool) -> mi.Color3f:
+              shadow_test, light_data: lights.Lights, area_shadow_test) -> mi.Color3f:
     """Local illumination of the visible interactions ``si`` (module doc).
 
     ``shadow_test(emitter, si, ds, lit) -> Bool`` says which points see a delta light;
-    ``area_shadows`` whether each area-light point gets a shadow ray.
+    ``area_shadow_test(si, hit)`` returns ``test(k, ds, lit) -> Bool``, which points see
+    area-light point ``k`` (:func:`area_shadow_test_of`).
     Every BSDF query of a sample for the delta and ambient lights (``eval`` per delta
     light, ``eval_diffuse_reflectance``) runs in one dispatch over the BSDFs, so a BSDF
     that prepares its interaction once (the mesostructure BSDFs' ``_prepare``: a slice
@@ -219,22 +225,22 @@ def shade_hit(scene: mi.Scene, si: mi.SurfaceInteraction3f, ray: mi.Ray3f, activ
             L += dr.select(hit, albedo[0] * lights.sh_irradiance(light_data.envmaps[id(e)], n),
                            0.0)
     if light_data.area.count:
-        L += area_light(scene, si, bsdf, hit, light_data.area, area_shadows)
+        L += area_light(si, bsdf, hit, light_data.area, area_shadow_test(si, hit))
     return L
 
 
-def area_light(scene: mi.Scene, si: mi.SurfaceInteraction3f, bsdf: mi.BSDFPtr, hit: mi.Bool,
-               samples: lights.AreaSamples, shadows: bool) -> mi.Color3f:
+def area_light(si: mi.SurfaceInteraction3f, bsdf: mi.BSDFPtr, hit: mi.Bool,
+               samples: lights.AreaSamples, visible) -> mi.Color3f:
     """Reflected radiance of the visible points ``si`` lit by the fixed area-light points
-    ``samples``: Σ_k f(wo_k) × weight_k × visible_k, a symbolic loop over the K points."""
+    ``samples``: Σ_k f(wo_k) × weight_k × visible(k, ds, lit), a symbolic loop over the
+    K points."""
     ctx = mi.BSDFContext()
     count = samples.count
 
     def body(k, L):
         ds, weight = lights.area_sample_toward(samples, k, si, hit)
         lit = hit & (dr.max(weight) > 0)
-        if shadows:
-            lit &= ~scene.ray_test(spawn_ray_to(si, ds.p, lit), lit)
+        lit &= visible(k, ds, lit)
         f = bsdf.eval(ctx, si, si.to_local(ds.d), lit)
         return k + 1, L + dr.select(lit, f * weight, 0.0)
 
@@ -269,6 +275,67 @@ def map_shadows(scene: mi.Scene, geom: zbuffer.Geometry, options: Options):
 
 def no_shadows(emitter, si, ds, lit):
     return mi.Bool(True)
+
+
+def area_shadow_test_of(scene: mi.Scene, geom, options: Options,
+                        samples: lights.AreaSamples):
+    """``(si, hit) -> test(k, ds, lit)``: which visible points see area-light point k —
+    a shadow ray (``shadows="ray"``), a lookup in the point's cube shadow map
+    (``"map"``: the maps are rasterised when ``si`` is known, one point at a time, and
+    their answers packed into bits), or everywhere (``"none"``)."""
+    def rays(si, hit):
+        return lambda k, ds, lit: ~scene.ray_test(spawn_ray_to(si, ds.p, lit), lit)
+
+    def maps(si, hit):
+        words = area_map_visibility(si, hit, geom, options, samples)
+        words_per_lane = (samples.count + 31) // 32
+        lane = dr.arange(mi.UInt32, dr.width(hit))
+
+        def test(k, ds, lit):
+            word = dr.gather(mi.UInt32, words, lane * words_per_lane + k // 32, lit)
+            return ((word >> (k % 32)) & 1) != 0
+        return test
+
+    def everywhere(si, hit):
+        return lambda k, ds, lit: mi.Bool(True)
+
+    if options.shadows == "ray":
+        return rays
+    if options.shadows == "map" and samples.count and dr.width(geom.faces):
+        return maps
+    return everywhere
+
+
+def area_map_visibility(si: mi.SurfaceInteraction3f, hit: mi.Bool, geom: zbuffer.Geometry,
+                        options: Options, samples: lights.AreaSamples) -> mi.UInt32:
+    """Which area-light points each visible point sees, by a cube shadow map per point
+    (``options.area_shadow_resolution``, the delta lights' bias and normal offset).
+
+    Returns:
+        (n x W,) UInt32 words, W = ceil(K / 32): bit k % 32 of word lane x W + k // 32 is
+        set where lane sees point k.
+    """
+    n, count = dr.width(hit), samples.count
+    per_lane = (count + 31) // 32
+    dr.eval(si, hit)   # the K lookups below read the interactions, not recompute them
+    points = np.array(samples.ps.p).T   # (K, 3)
+    words = [dr.zeros(mi.UInt32, n) for _ in range(per_lane)]
+    res = options.area_shadow_resolution
+    for k in range(count):   # the light points, one cube map each (not elements)
+        sm = shadow_map.build_views(shadow_map.point_views(points[k], geom.bbox, res), geom,
+                                    res, options.shadow_bias, options.shadow_normal_offset,
+                                    f"the shadow map of area-light point {k}")
+        # opaque: the K lookups share one compiled kernel
+        point = dr.gather(mi.Point3f, samples.ps.p, dr.opaque(mi.UInt32, k))
+        to_light = dr.normalize(point - si.p)
+        seen = shadow_map.unshadowed(sm, si, to_light, hit)
+        words[k // 32] |= dr.select(seen, dr.opaque(mi.UInt32, 1 << (k % 32)), 0)
+        dr.eval(words[k // 32])
+    flat = dr.zeros(mi.UInt32, n * per_lane)
+    lane = dr.arange(mi.UInt32, n)
+    for w, word in enumerate(words):   # ceil(K / 32) words
+        dr.scatter(flat, word, lane * per_lane + w)
+    return flat
 
 
 def shadow_test_of(scene: mi.Scene, geom, options: Options):
@@ -315,7 +382,8 @@ def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8, active: mi.Bool =
     light_data = lights.prepare(scene, area_samples)
     active = mi.Bool(active)
     si, ray = first_opaque_hit(scene, ray, max_layers, active)
-    return shade_hit(scene, si, ray, active, ray_shadows(scene), light_data, True)
+    area_test = area_shadow_test_of(scene, None, Options(), light_data.area)   # rays
+    return shade_hit(scene, si, ray, active, ray_shadows(scene), light_data, area_test)
 
 
 def pixel_rays(sensor: mi.Sensor, aa: int) -> tuple[mi.Ray3f, mi.Color3f, int, int]:
@@ -404,13 +472,10 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
     lights.check(scene)
     w, h = sensor.film().crop_size()
     zbuffer.check_memory(int(w) * int(h) * aa * aa, f"a {w}x{h} film at aa={aa}")
-    area_shadows = options.shadows != "none"
-    traces = (options.visibility == "raytrace" or options.shadows == "ray"
-              or (area_shadows and any(lights.is_area(e) for e in scene.emitters())))
+    traces = options.visibility == "raytrace" or options.shadows == "ray"
     if shapes is not None and traces:
         raise ValueError("raster: explicit 'shapes' need visibility='zbuffer' and "
-                         "shadows='map' or 'none', and shadows='none' with area lights "
-                         "(rays are traced through the scene's shapes)")
+                         "shadows='map' or 'none' (rays are traced through the scene's shapes)")
     light_data = lights.prepare(scene, options.area_samples)
     geom = None
     if options.visibility == "zbuffer" or options.shadows == "map":
@@ -426,7 +491,8 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
         else:
             si = zbuffer_hit(sensor, geom, ray, aa, max_layers)
         L = shade_hit(scene, si, ray, active, shadow_test_of(scene, geom, options),
-                      light_data, area_shadows) * weight
+                      light_data, area_shadow_test_of(scene, geom, options, light_data.area))
+        L *= weight
         dr.eval(L)
     finally:
         for shape in drawn:
