@@ -588,8 +588,10 @@ def cornell_box(integrator: dict, res: int) -> mi.Scene:
 def area_sweep(res: int = 128, ref_spp: int = 4096, aa: int = 4,
                counts=(1, 4, 16, 64, 256)) -> dict:
     """``area_samples`` against path (max_depth 2) on the Cornell box: FLIP, mean absolute
-    error and warm render time per count, with shadow rays; the reference's noise floor
-    (FLIP between its two halves) and path's own FLIP and time at a few spp."""
+    error and warm render time per count, with shadow rays; 16 points with a cube shadow
+    map each at a few ``area_shadow_resolution`` (FLIP also against the shadow-ray
+    image); the reference's noise floor (FLIP between its two halves) and path's own FLIP
+    and time at a few spp."""
     from mi_displace.evaluate.metrics import flip as flip_error
 
     path = cornell_box({"type": "path", "max_depth": 2}, res)
@@ -598,13 +600,21 @@ def area_sweep(res: int = 128, ref_spp: int = 4096, aa: int = 4,
     record = {"scene": "mi.cornell_box()", "res": res, "aa": aa, "reference_spp": ref_spp,
               "noise_floor_flip": float(flip_error(halves[0], halves[1])[0]), "raster": [],
               "path": []}
-    for n in counts:
-        sc = cornell_box({"type": "raster", "aa": aa, "area_samples": n}, res)
+    rays = {}
+    settings = [{"area_samples": n} for n in counts]
+    settings += [{"area_samples": 16, "shadows": "map", "area_shadow_resolution": r}
+                 for r in (64, 256, 1024)]
+    for setting in settings:
+        sc = cornell_box(dict({"type": "raster", "aa": aa}, **setting), res)
         img = _image(sc)
-        record["raster"].append({
-            "area_samples": n, "flip": float(flip_error(reference, img)[0]),
-            "mae": float(np.abs(img - reference).mean()),
-            "render_s": median_time(lambda: _image(sc), 3)})
+        row = dict(setting, flip=float(flip_error(reference, img)[0]),
+                   mae=float(np.abs(img - reference).mean()),
+                   render_s=median_time(lambda: _image(sc), 3))
+        if "shadows" in setting:
+            row["flip_vs_shadow_rays"] = float(flip_error(rays[16], img)[0])
+        else:
+            rays[setting["area_samples"]] = img
+        record["raster"].append(row)
     for spp in (4, 16, 64):
         seed = 2   # the reference used seeds 0 and 1
         img = np.array(mi.render(path, spp=spp, seed=seed))[..., :3]
