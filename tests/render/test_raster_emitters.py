@@ -247,3 +247,20 @@ def test_light_pattern_is_stratified(variant):
         for axis in (0, 1):
             assert len(np.unique(np.floor(u[axis] * n))) == n
     assert np.allclose(np.array(lights.sample_pattern(1)).ravel(), 0.5)
+
+
+def test_area_light_with_shapes_outside_the_scene(variant):
+    """Z-buffer + shadow maps: the room drawn from shapes kept outside a scene that holds
+    only the light's rectangle equals the room drawn from the scene's own shapes."""
+    options = {"type": "raster", "visibility": "zbuffer", "shadows": "map", "area_samples": 4}
+    room = cornell_box(options)
+    inside = render(room)
+    d = mi.cornell_box()
+    bare = mi.load_dict({"type": "scene", "integrator": options, "sensor": dict(
+        d["sensor"], film=dict(d["sensor"]["film"], width=64, height=64,
+                               rfilter={"type": "box"})), "white": d["white"],
+                         "light": d["light"]})
+    assert len(bare.shapes()) == 1
+    bare.integrator().shapes = list(room.shapes())
+    outside = render(bare)
+    assert np.array_equal(inside, outside) and inside.mean() > 0.05
