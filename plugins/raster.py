@@ -67,7 +67,7 @@ class Raster(mi.SamplingIntegrator):
     def setup_problem(self, scene) -> str | None:
         """Why this integrator cannot render ``scene`` (one line), or ``None``: an
         emitter it does not model.  Scene loaders call it after loading."""
-        return lights.emitter_problem(scene)
+        return lights.emitter_problem(scene, "raster")
 
     def to_string(self):
         o = self.options

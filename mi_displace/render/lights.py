@@ -16,7 +16,9 @@
   maps", eq. 7 and 13), n the shading normal on the viewer's side.
 
 Any other emitter (``directionalarea``, ``sunsky``, a plugin's) is refused by
-:func:`emitter_problem` before anything renders: raster never drops a light silently.
+:func:`emitter_problem` before anything renders: raster never drops a light silently.  The
+``volume_slicer`` integrator (delta lights and ``constant`` ambient only) is checked the
+same way.
 """
 from __future__ import annotations
 
@@ -48,14 +50,26 @@ def is_envmap(emitter: mi.Emitter) -> bool:
     return emitter.class_name() == "EnvironmentMapEmitter"
 
 
-def emitter_problem(scene: mi.Scene) -> str | None:
-    """One line naming the first emitter `raster` cannot draw, or ``None``."""
+#: Per GPU-style integrator: which emitters it draws, and the list its message names.
+DRAWS = {
+    "raster": (lambda e: is_delta(e) or is_area(e) or is_constant(e) or is_envmap(e),
+               "point, spot, directional, projector and area lights and constant/envmap "
+               "ambient light", "path"),
+    "volume_slicer": (lambda e: is_delta(e) or is_constant(e),
+                      "point, spot, directional and projector lights and constant ambient "
+                      "light", "volpath"),
+}
+
+
+def emitter_problem(scene: mi.Scene, integrator: str = "raster") -> str | None:
+    """One line naming the first emitter ``integrator`` (a key of :data:`DRAWS`) cannot
+    draw, or ``None``."""
+    drawn, models, instead = DRAWS[integrator]
     for e in scene.emitters():
-        if not (is_delta(e) or is_area(e) or is_constant(e) or is_envmap(e)):
-            return (f"raster: cannot draw emitter {e.id() or '(unnamed)'!r} of class "
-                    f"{e.class_name()}: the raster integrator models point, spot, "
-                    "directional, projector and area lights and constant/envmap ambient "
-                    "light; remove it or render the scene with 'path'")
+        if not drawn(e):
+            return (f"{integrator}: cannot draw emitter {e.id() or '(unnamed)'!r} of class "
+                    f"{e.class_name()}: the {integrator} integrator models {models}; remove "
+                    f"it or render the scene with {instead!r}")
     return None
 
 
@@ -189,9 +203,10 @@ class Lights:
     envmaps: dict = field(default_factory=dict)   # id(emitter) -> envmap_sh coefficients
 
 
-def check(scene: mi.Scene) -> None:
-    """Raises ValueError naming the first emitter `raster` cannot draw (no kernel runs)."""
-    problem = emitter_problem(scene)
+def check(scene: mi.Scene, integrator: str = "raster") -> None:
+    """Raises ValueError naming the first emitter ``integrator`` cannot draw (no kernel
+    runs)."""
+    problem = emitter_problem(scene, integrator)
     if problem:
         raise ValueError(problem)
 

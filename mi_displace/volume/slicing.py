@@ -37,7 +37,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.render.lights import is_constant, is_delta
+from mi_displace.render.lights import check as check_emitters, is_constant, is_delta
 from mi_displace.render.raster import pixel_rays
 from mi_displace.volume.displacement import Lookup
 from mi_displace.volume.field import NORMALS, AlbedoField, DisplacedVolume
@@ -221,7 +221,13 @@ def _slice_frame(sensor: mi.Sensor, lo, hi, spacing):
 
 
 def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSettings) -> mi.TensorXf:
-    """Render the displaced volume by slicing; returns a (height, width, 3) linear tensor."""
+    """Render the displaced volume by slicing; returns a (height, width, 3) linear tensor.
+
+    Raises:
+        ValueError: an emitter the slicer does not model (area lights, environment maps),
+            before anything renders.
+    """
+    check_emitters(scene, "volume_slicer")
     vol.prepare()
     if s.albedo_field is not None:
         s.albedo_field.prepare()
