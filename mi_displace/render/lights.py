@@ -165,11 +165,12 @@ def envmap_sh(emitter: mi.Emitter) -> list:
 
     L_lm = ∫ L(ω) Y_lm(ω) dω by the midpoint rule (in z = cos θ and φ) over a
     latitude-longitude grid with exact cell solid angles (a constant environment is
-    reproduced to float rounding), 2 cells per
-    texel of the emitter's bitmap in each direction (64 × 128 at least, 1024 × 2048 at most).
+    reproduced to float rounding), 2 cells per texel of the emitter's bitmap in each
+    direction (64 × 128 at least, 1024 × 2048 at most: a map of more than 512 rows is read
+    at cell centres coarser than its texels, and a sun smaller than a cell may be missed).
     """
-    data = mi.traverse(emitter).get("data") if "data" in mi.traverse(emitter).keys() else None
-    rows = 64 if data is None else int(data.shape[0])
+    params = mi.traverse(emitter)
+    rows = int(params["data"].shape[0]) if "data" in params.keys() else 64
     n_theta = min(max(2 * rows, 64), 1024)
     n_phi = 2 * n_theta
     idx = dr.arange(mi.UInt32, n_theta * n_phi)
