@@ -40,6 +40,11 @@ VARIANT_MODULES = [
 _registered_for: str | None = None
 
 
+def registered_variant() -> str | None:
+    """The variant the plugins were last registered for (``None``: not yet)."""
+    return _registered_for
+
+
 def register_all() -> None:
     """Import (or re-import for a new variant) every plugin module and register it."""
     global _registered_for

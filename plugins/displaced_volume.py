@@ -151,6 +151,10 @@ class DisplacedVolumePlugin(mi.Volume):
     """sigma_t (or the albedo) of the displaced object (see the module docstring)."""
 
     def __init__(self, props: mi.Properties):
+        if "to_world" in props:   # it would be overwritten below by the medium box: refuse it
+            raise ValueError("displaced_volume: parameter 'to_world' is not supported: the object "
+                             "is centred with its longest side 1 world unit (docs/volume.md); place "
+                             "the maps with map<i>_to_world and move the camera, not the object")
         self.output = props.get("output", "sigma_t")
         if self.output not in OUTPUTS:
             raise ValueError(f"displaced_volume: output must be one of {OUTPUTS}, got {self.output!r}")

@@ -4,7 +4,7 @@
 
     <integrator type="raster">
         <integer name="aa" value="1"/>          <!-- aa x aa fixed samples per pixel -->
-        <integer name="max_layers" value="8"/>  <!-- alpha-test pass-throughs (raytrace) -->
+        <integer name="max_layers" value="8"/>  <!-- alpha-test pass-throughs; default: sized from the scene -->
         <string name="visibility" value="raytrace"/>   <!-- raytrace|zbuffer -->
         <string name="shadows" value="ray"/>           <!-- ray|map|none -->
         <integer name="shadow_resolution" value="2048"/>  <!-- shadow-map texels per side -->
@@ -35,11 +35,12 @@ class Raster(mi.SamplingIntegrator):
     def __init__(self, props: mi.Properties):
         super().__init__(props)
         self.aa = int(props.get("aa", 1))
-        self.max_layers = int(props.get("max_layers", 8))
+        #: None: raster.layer_limit of the scene (no ray is cut short)
+        self.max_layers = props.get("max_layers", None)
         if self.aa < 1:
             raise ValueError(f"raster: 'aa' must be a positive integer, got {self.aa}")
-        if self.max_layers < 1:
-            raise ValueError(f"raster: 'max_layers' must be >= 1, got {self.max_layers}")
+        if self.max_layers is not None and not (isinstance(self.max_layers, int) and self.max_layers >= 1):
+            raise ValueError(f"raster: 'max_layers' must be an integer >= 1, got {self.max_layers!r}")
         defaults = raster.Options()
         self.options = raster.Options(
             visibility=str(props.get("visibility", defaults.visibility)),
@@ -71,7 +72,8 @@ class Raster(mi.SamplingIntegrator):
 
     def to_string(self):
         o = self.options
-        return (f"Raster[aa={self.aa}, max_layers={self.max_layers}, visibility={o.visibility}, "
+        layers = "auto" if self.max_layers is None else self.max_layers
+        return (f"Raster[aa={self.aa}, max_layers={layers}, visibility={o.visibility}, "
                 f"shadows={o.shadows}, shadow_resolution={o.shadow_resolution}, "
                 f"area_samples={o.area_samples}]")
 

@@ -1,6 +1,6 @@
 """``<integrator type="volume_slicer">``: the paper's slicing volume renderer (§4.2) of
-:mod:`mi_displace.volume.slicing`, GPU-style and deterministic.  The adapter: :data:`SPEC`
-reads the parameters, :func:`mi_displace.volume.slicing.render` draws the frame.
+:mod:`mi_displace.volume.slicer`, GPU-style and deterministic.  The adapter: :data:`SPEC`
+reads the parameters, :func:`mi_displace.volume.slicer.render` draws the frame.
 
 A separate integrator rather than a mode of ``raster``: ``raster`` shades the first opaque
 surface a ray meets, while slicing composites every slice through a volume and needs the
@@ -11,7 +11,7 @@ import mitsuba as mi
 
 from mi_displace.core.properties import REQUIRED, Param, PluginSpec
 from mi_displace.render import lights
-from mi_displace.volume import EXAMPLE_XML, slicing
+from mi_displace.volume import EXAMPLE_XML, slicer
 from mi_displace.volume.field import NORMALS
 from mi_displace.plugins._guard import constructor
 
@@ -24,7 +24,7 @@ SPEC = PluginSpec(
     (
         Param("volume", "volume", REQUIRED, "the `displaced_volume` to draw (a `<ref>`)"),
         Param("model", "string", "scatter", "`scatter` (matches volpath) or `surface`",
-              choices=slicing.MODELS),
+              choices=slicer.MODELS),
         Param("normals", "string", "jacobian", "surface model: how normals are found", choices=NORMALS),
         Param("spacing", "float", 1.0, "distance between slices", unit="object voxels", low=0, open_low=True),
         Param("albedo", "float|volume", 0.8, "scatter: the medium's albedo, or a `displaced_volume` "
@@ -67,17 +67,17 @@ class VolumeSlicer(mi.SamplingIntegrator):
                                  "displaced_volume with output=\"albedo\"")
             albedo = albedo.albedo
         self.plugin = volume
-        self.settings = slicing.SliceSettings(
+        self.settings = slicer.SliceSettings(
             model=values["model"], normals=values["normals"], spacing=values["spacing"],
             albedo=albedo, color=values["color"], iso=values["iso"], sharpness=values["sharpness"],
             shadows=values["shadows"], light_resolution=values["light_resolution"],
             aa=values["aa"], reuse_lookup=values["reuse_lookup"])
-        slicing.check_slices(volume.volume, self.settings)
+        slicer.check_slices(volume.volume, self.settings)
 
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
-        return slicing.render(scene, sensor, self.plugin.volume, self.settings)
+        return slicer.render(scene, sensor, self.plugin.volume, self.settings)
 
     def setup_problem(self, scene) -> str | None:
         """An emitter the slicer does not model (one line), or ``None``; scene loaders

@@ -17,7 +17,7 @@ from mi_displace.core import backend
 backend.init()
 import drjit as dr
 from mi_displace.bench import volume as B
-from mi_displace.volume import displacement as ad, field as af, slicing as s
+from mi_displace.volume import displacement as ad, field as af, slicer as s
 
 obj, sensor, scene = B.walnut_256(), B._sensor(), B.sun_scene()
 st = s.SliceSettings(model="surface", normals="jacobian", spacing=1.0, shadows=False, iso=B.ISO)

@@ -50,12 +50,13 @@ from pathlib import Path
 import drjit as dr
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[2]
+from mi_displace.core.resources import data_path
+
 DEFAULT_OUT = Path(tempfile.gettempdir()) / "mi_displace_bench" / "bake"
-HIGH = REPO / "data" / "bunny" / "stanford-bunny.obj"
+HIGH = data_path("bunny", "stanford-bunny.obj")
 LOW_FACES = 4857
-SPOT = REPO / "data" / "spot" / "spot_triangulated.obj"
-SPOT_CAGE = REPO / "data" / "spot" / "spot_control_mesh.obj"
+SPOT = data_path("spot", "spot_triangulated.obj")
+SPOT_CAGE = data_path("spot", "spot_control_mesh.obj")
 
 
 def _pair():

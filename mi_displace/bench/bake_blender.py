@@ -36,10 +36,11 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[2]
+from mi_displace.core.resources import data_path
+
 DEFAULT_OUT = Path(tempfile.gettempdir()) / "mi_displace_bench" / "bake_blender"
-SPOT = REPO / "data" / "spot" / "spot_triangulated.obj"
-BUNNY = REPO / "data" / "bunny" / "stanford-bunny.obj"
+SPOT = data_path("spot", "spot_triangulated.obj")
+BUNNY = data_path("bunny", "stanford-bunny.obj")
 
 
 def spot_displaced():

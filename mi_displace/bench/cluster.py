@@ -1,6 +1,6 @@
 """``mi-displace bench cluster``: one 24-point sweep run locally and on a local Dask cluster.
 
-The sweep is ``tests/data/tradeoff/bumpy_sphere.xml`` at 64x64: ``resolution`` (8 values)
+The sweep is the packaged ``scenes/tradeoff/bumpy_sphere.xml`` at 64x64: ``resolution`` (8 values)
 x ``ball.scale`` (3 values), each point its own job (cold + 3 warm rounds).  It runs once in
 this process and once on ``local:2`` (two single-threaded worker processes on this
 machine), each with an empty point cache, and reports both wall times, whether every
@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import statistics
 import time
-from pathlib import Path
 
 from mi_displace.bench._timing import print_record
+from mi_displace.core.resources import scene_path
 
-SCENE = Path(__file__).resolve().parents[2] / "tests" / "data" / "tradeoff" / "bumpy_sphere.xml"
+SCENE = scene_path("tradeoff", "bumpy_sphere.xml")
 KNOBS = ("resolution=6,8,12,16,24,32,48,64", "ball.scale=0.1,0.15,0.2")
 WORKERS = 2
 
@@ -37,8 +37,9 @@ def run() -> dict:
 
     from mi_displace.evaluate import compare as cmp
     from mi_displace.evaluate import tradeoff as tr
-    from mi_displace.evaluate.jobs import run_jobs
+    from mi_displace.evaluate.jobs import check_cluster, run_jobs
 
+    check_cluster(f"local:{WORKERS}")   # the [cluster] extra, before the local half runs
     knobs = [tr.parse_knob(k) for k in KNOBS]
     settings = cmp.protocol_settings(SCENE, {"res": "64"})
     jobs = [tr._point_job(SCENE, settings, point, knobs, 3) for point in tr.sweep_points(knobs)]

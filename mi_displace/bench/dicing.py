@@ -33,11 +33,11 @@ import drjit as dr
 import mitsuba as mi
 
 from mi_displace.bench._timing import print_record
+from mi_displace.core.resources import FIGURES_DIR, scene_path
 from mi_displace.evaluate import metrics
 from mi_displace.render import scene as scenes
 
 CYCLES_FACES = 821_760       # Cycles' count for its 5,120-triangle sphere (issue 13, quoted)
-ROOT = Path(__file__).resolve().parents[2]
 SPP = 32
 SWEEPS = {  # scene -> (extra -D parameters, uniform resolutions)
     "displaced_sphere": ({}, [128, 256, 512, 1024, 2048]),
@@ -146,7 +146,7 @@ def cycles_sphere() -> dict:
 
 def sweep(name: str) -> dict:
     """Part 2 for one scene."""
-    path = ROOT / "scenes" / f"{name}.xml"
+    path = scene_path(f"{name}.xml")
     extra, resolutions = SWEEPS[name]
     dicing_params = ({"mode": "approximation"} if name == "displaced_horizon"
                      else {**extra, "tessellation": "dicing"})
@@ -242,7 +242,7 @@ def run() -> dict:
 
 def main(json: bool = False, replot: bool = False) -> int:
     """Run the benchmark (or, with ``replot``, redraw the figure from the saved JSON)."""
-    figures = ROOT / "docs" / "figures"
+    figures = FIGURES_DIR
     if replot:
         result = _json.loads((figures / "dicing_bench.json").read_text())
         plot(result["sweeps"], figures / "dicing_flip_vs_faces.png")

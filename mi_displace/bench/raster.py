@@ -44,10 +44,10 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.bench._timing import median_time
+from mi_displace.core.resources import data_path, scene_path
 from mi_displace.render import raster
 
-ROOT = Path(__file__).resolve().parents[2]
-SPOT = str(ROOT / "data" / "spot" / "spot_triangulated.obj")
+SPOT = str(data_path("spot", "spot_triangulated.obj"))
 RES = 512
 SUN_DIRECTION = (-1.0, 1.0, -1.0)
 ALBEDO = (0.7, 0.6, 0.5)
@@ -407,7 +407,7 @@ def _load(name: str, res: int) -> mi.Scene:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return mi.load_file(str(ROOT / "scenes" / f"{name}.xml"), mode="approximation",
+        return mi.load_file(str(scene_path(f"{name}.xml")), mode="approximation",
                             integrator="raster", res=res)
 
 
@@ -446,9 +446,10 @@ def consistency(res: int = 256) -> list[dict]:
         rt_img, rt_s = _render(sc, raster.Options())
         zb_img, zb_s = _render(sc, raster.Options(visibility="zbuffer"))
         ray, _, _, _ = raster.pixel_rays(sensor, aa)
-        si_rt, _ = raster.first_opaque_hit(sc, ray, sc.integrator().max_layers, mi.Bool(True))
+        layers = sc.integrator().max_layers or raster.layer_limit(sc.shapes())
+        si_rt, _, _ = raster.first_opaque_hit(sc, ray, layers, mi.Bool(True))
         geom = zbuffer.gather_geometry(sc.shapes())
-        si_zb = raster.zbuffer_hit(sensor, geom, ray, aa)
+        si_zb, _ = raster.zbuffer_hit(sensor, geom, ray, aa, layers)
         same = (si_rt.is_valid() == si_zb.is_valid()) & (
             ~si_rt.is_valid() | ((si_rt.prim_index == si_zb.prim_index)
                                  & (si_rt.shape == si_zb.shape)))

@@ -50,13 +50,14 @@ import json as _json
 import os
 import statistics
 import time
-from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-SCENES = Path(__file__).resolve().parents[2] / "scenes"
+from mi_displace.core.resources import scenes_dir
+
+SCENES = scenes_dir()
 RES = 512
 
 

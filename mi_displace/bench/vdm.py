@@ -24,12 +24,13 @@ import os
 import statistics
 import tempfile
 import time
-from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 
-SCENE = Path(__file__).resolve().parents[2] / "scenes" / "vdm_torus.xml"
+from mi_displace.core.resources import scene_path
+
+SCENE = scene_path("vdm_torus.xml")
 TARGETS = {"build_time_s": 10.0, "render_time_warm_s": 0.3, "compression_ratio": 10.0}
 
 

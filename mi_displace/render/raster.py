@@ -33,6 +33,7 @@ Nothing is random: two renders are bit-identical.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import drjit as dr
@@ -86,9 +87,34 @@ def spawn_ray_to(si: mi.SurfaceInteraction3f, target: mi.Point3f,
     return ray
 
 
-def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int,
-                     active: mi.Bool) -> tuple[mi.SurfaceInteraction3f, mi.Ray3f]:
-    """Trace ``ray`` through up to ``max_layers`` surfaces that pass the alpha test.
+def layer_limit(shapes) -> int:
+    """The most alpha-test pass-throughs a ray can need among ``shapes``: 1 + the triangles
+    of every mesh whose BSDF has a null component (a ray crosses a plane triangle at most
+    once, :func:`spawn_offset` moves it past) + 2 for every other such shape (a quadric or
+    a plane is crossed at most twice).  The ``max_layers`` that never cuts a ray short;
+    the loops run only as long as the longest chain of pass-throughs actually met."""
+    limit = 1
+    for shape in shapes:   # a handful of shapes
+        bsdf = shape.bsdf()
+        if bsdf is not None and mi.has_flag(bsdf.flags(), mi.BSDFFlags.Null):
+            limit += int(shape.face_count()) if shape.is_mesh() else 2
+    return limit
+
+
+def warn_exhausted(count: int, total: int, max_layers: int) -> None:
+    """Warn that ``count`` of ``total`` samples met more pass-through surfaces than
+    ``max_layers`` (they show the last one, not what lies behind it)."""
+    if count:
+        warnings.warn(f"raster: {count} of {total} samples crossed more than max_layers="
+                      f"{max_layers} pass-through (alpha-tested) surfaces and show the last "
+                      "one, not what lies behind it; raise 'max_layers' or leave it unset "
+                      "(sized from the scene)", stacklevel=3)
+
+
+def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int | None,
+                     active: mi.Bool) -> tuple[mi.SurfaceInteraction3f, mi.Ray3f, mi.Bool]:
+    """Trace ``ray`` through up to ``max_layers`` surfaces that pass the alpha test
+    (``None``: :func:`layer_limit` of the scene's shapes, never reached).
 
     Alpha test: the hit's BSDF null transmission (channel mean) >= 0.5 lets the ray go on.
     The loop keeps each ray's last interaction, so the interaction returned is the one the
@@ -96,27 +122,33 @@ def first_opaque_hit(scene: mi.Scene, ray: mi.Ray3f, max_layers: int,
     not built a second time.
 
     Returns:
-        The first opaque (or last) interaction and the ray that found it.
+        The first opaque (or last) interaction, the ray that found it, and per ray whether
+        the limit stopped it on a surface that passes the alpha test (``exhausted``).
     """
+    if max_layers is None:
+        max_layers = layer_limit(scene.shapes())
 
-    def cond(ray, si, layer, going):
+    def cond(ray, si, layer, going, exhausted):
         return going
 
-    def body(ray, si, layer, going):
+    def body(ray, si, layer, going, exhausted):
         si = scene.ray_intersect(ray, mi.RayFlags.All, False, going)
         bsdf = si.bsdf(ray)
         null = dr.mean(bsdf.eval_null_transmission(si, going & si.is_valid()), axis=0)
-        passes = going & si.is_valid() & (null >= 0.5) & (layer + 1 < max_layers)
+        clear = going & si.is_valid() & (null >= 0.5)
+        passes = clear & (layer + 1 < max_layers)
+        exhausted = clear & ~passes
         ray = dr.select(passes, spawn_ray(si, ray.d, passes), ray)
-        return ray, si, layer + 1, passes
+        return ray, si, layer + 1, passes, exhausted
 
     n = dr.width(ray)   # a ray component may be width 1 (a camera's origin or direction)
     miss = dr.zeros(mi.SurfaceInteraction3f, n)
     miss.t = dr.full(mi.Float, dr.inf, n)   # lanes never traced (inactive)
-    ray, si, _, _ = dr.while_loop(
-        state=(mi.Ray3f(ray), miss, mi.UInt32(0), mi.Bool(active)),
-        cond=cond, body=body, labels=("ray", "si", "layer", "going"), label="raster_alpha_test")
-    return si, ray
+    ray, si, _, _, exhausted = dr.while_loop(
+        state=(mi.Ray3f(ray), miss, mi.UInt32(0), mi.Bool(active), dr.zeros(mi.Bool, n)),
+        cond=cond, body=body, labels=("ray", "si", "layer", "going", "exhausted"),
+        label="raster_alpha_test")
+    return si, ray, exhausted
 
 
 @dataclass
@@ -358,7 +390,7 @@ def light_masks(scene: mi.Scene, sensor: mi.Sensor, options: Options,
     """
     options = options.check()
     ray, _, _, _ = pixel_rays(sensor, aa)
-    si, ray = first_opaque_hit(scene, ray, 8, mi.Bool(True))
+    si, ray, _ = first_opaque_hit(scene, ray, None, mi.Bool(True))
     hit = si.is_valid()
     geom = zbuffer.gather_geometry(scene.shapes()) if options.shadows == "map" else None
     test = shadow_test_of(scene, geom, options)
@@ -371,9 +403,10 @@ def light_masks(scene: mi.Scene, sensor: mi.Sensor, options: Options,
     return hit, masks
 
 
-def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8, active: mi.Bool = True,
-          area_samples: int = Options.area_samples) -> mi.Color3f:
-    """Radiance [scene units] along primary rays: ray-traced visibility and shadows.
+def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int | None = None,
+          active: mi.Bool = True, area_samples: int = Options.area_samples) -> mi.Color3f:
+    """Radiance [scene units] along primary rays: ray-traced visibility and shadows
+    (``max_layers``: :func:`first_opaque_hit`; ``area_samples``: points per area light).
 
     Raises:
         ValueError: an emitter raster cannot draw (:func:`.lights.emitter_problem`).
@@ -381,7 +414,7 @@ def shade(scene: mi.Scene, ray: mi.Ray3f, max_layers: int = 8, active: mi.Bool =
     lights.check(scene)
     light_data = lights.prepare(scene, area_samples)
     active = mi.Bool(active)
-    si, ray = first_opaque_hit(scene, ray, max_layers, active)
+    si, ray, _ = first_opaque_hit(scene, ray, max_layers, active)
     area_test = area_shadow_test_of(scene, None, Options(), light_data.area)   # rays
     return shade_hit(scene, si, ray, active, ray_shadows(scene), light_data, area_test)
 
@@ -403,7 +436,7 @@ def pixel_rays(sensor: mi.Sensor, aa: int) -> tuple[mi.Ray3f, mi.Color3f, int, i
 
 
 def zbuffer_hit(sensor: mi.Sensor, geom: zbuffer.Geometry, ray: mi.Ray3f, aa: int,
-                max_layers: int = 8) -> mi.SurfaceInteraction3f:
+                max_layers: int = 8) -> tuple[mi.SurfaceInteraction3f, int]:
     """What each primary ray sees, by z-buffer: rasterise, resolve, build interactions.
 
     Alpha test: a fragment of a shape whose BSDF has a null component does not count where
@@ -412,12 +445,16 @@ def zbuffer_hit(sensor: mi.Sensor, geom: zbuffer.Geometry, ray: mi.Ray3f, aa: in
     and, where it is discarded, the sample is rasterised again keeping only fragments
     behind it (up to ``max_layers`` layers, like the ray-traced path), so the alpha shader
     runs once per sample and layer, not once per fragment.
+
+    Returns:
+        The interactions and how many samples still saw a discarded fragment after
+        ``max_layers`` layers (they show it: :func:`warn_exhausted`).
     """
     view = zbuffer.view_from_sensor(sensor, aa)
     if dr.width(geom.faces) == 0:   # nothing to draw: every sample misses
         si = dr.zeros(mi.SurfaceInteraction3f, dr.width(ray))
         si.t, si.wi, si.wavelengths = dr.inf, -ray.d, ray.wavelengths
-        return si
+        return si, 0
     keys, clip = zbuffer.rasterise(view, geom, True, aa=aa)
 
     def resolve(index, keys, ray):
@@ -434,11 +471,15 @@ def zbuffer_hit(sensor: mi.Sensor, geom: zbuffer.Geometry, ray: mi.Ray3f, aa: in
 
     everything = dr.arange(mi.UInt32, dr.width(keys))
     pending = everything   # samples whose winning fragment may be discarded
-    for _ in range(max_layers - 1 if geom.alpha_any else 0):
+
+    def discarded(pending):
         r = dr.gather(mi.Ray3f, ray, pending)
         si, alpha = resolve(pending, dr.gather(mi.UInt64, keys, pending), r)
         null = dr.mean(si.bsdf(r).eval_null_transmission(si, alpha), axis=0)
-        pending = dr.gather(mi.UInt32, pending, dr.compress(alpha & (null >= 0.5)))
+        return dr.gather(mi.UInt32, pending, dr.compress(alpha & (null >= 0.5)))
+
+    for _ in range(max_layers - 1 if geom.alpha_any else 0):
+        pending = discarded(pending)
         if dr.width(pending) == 0:
             break
         floor = dr.full(mi.UInt64, zbuffer.EMPTY, dr.width(keys))
@@ -446,10 +487,12 @@ def zbuffer_hit(sensor: mi.Sensor, geom: zbuffer.Geometry, ray: mi.Ray3f, aa: in
         behind, _ = zbuffer.rasterise(view, geom, True, aa=aa, floor=floor)
         dr.scatter(keys, dr.gather(mi.UInt64, behind, pending), pending)
         dr.eval(keys)
-    return resolve(everything, keys, ray)[0]
+    else:   # the limit ran out: the samples it cut short (none if nothing is alpha-tested)
+        pending = discarded(pending) if geom.alpha_any else dr.zeros(mi.UInt32, 0)
+    return resolve(everything, keys, ray)[0], dr.width(pending)
 
 
-def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
+def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int | None = None,
            options: Options | None = None, shapes=None) -> mi.TensorXf:
     """Render ``scene`` GPU-style; returns a (height, width, 3) linear RGB tensor.
 
@@ -457,6 +500,9 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
     the film's own reconstruction filter is not used.
 
     Args:
+        max_layers: alpha-test pass-throughs per sample; ``None``: :func:`layer_limit`
+            of the drawn shapes (never reached).  Samples a given limit cuts short are
+            counted and warned about (:func:`warn_exhausted`).
         options: visibility and shadow methods (default: ray tracing, shadow rays).
         shapes: the meshes to draw instead of ``scene.shapes()`` — with
             ``visibility="zbuffer"`` and ``shadows="map"|"none"`` the scene then needs no
@@ -465,8 +511,7 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
     Raises:
         ValueError: bad options, an emitter raster cannot draw, a film whose sample
             buffers exceed the memory budget (before anything is allocated), or ``shapes``
-            given to a method that traces rays through the scene (area lights always do,
-            unless ``shadows="none"``).
+            given to a method that traces rays through the scene.
     """
     options = (options or Options()).check()
     lights.check(scene)
@@ -478,25 +523,28 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int = 8,
                          "shadows='map' or 'none' (rays are traced through the scene's shapes)")
     light_data = lights.prepare(scene, options.area_samples)
     geom = None
+    every = list(scene.shapes() if shapes is None else shapes)
     if options.visibility == "zbuffer" or options.shadows == "map":
-        geom = zbuffer.gather_geometry(scene.shapes() if shapes is None else shapes)
+        geom = zbuffer.gather_geometry(every)
+    limit = layer_limit(every) if max_layers is None else max_layers
     ray, weight, w, h = pixel_rays(sensor, aa)
     active = mi.Bool(True)
-    drawn = [s for s in (scene.shapes() if shapes is None else shapes) if hasattr(s, "raster_begin")]
+    drawn = [s for s in every if hasattr(s, "raster_begin")]
     try:
         for shape in drawn:   # a handful of shapes
             shape.raster_begin(sensor, aa)
         if options.visibility == "raytrace":
-            si, ray = first_opaque_hit(scene, ray, max_layers, active)
+            si, ray, cut = first_opaque_hit(scene, ray, limit, active)
         else:
-            si = zbuffer_hit(sensor, geom, ray, aa, max_layers)
+            si, cut = zbuffer_hit(sensor, geom, ray, aa, limit)
         L = shade_hit(scene, si, ray, active, shadow_test_of(scene, geom, options),
                       light_data, area_shadow_test_of(scene, geom, options, light_data.area))
         L *= weight
-        dr.eval(L)
+        dr.eval(L, cut)   # one kernel: the alpha-test loop's outputs together
     finally:
         for shape in drawn:
             shape.raster_end()
+    warn_exhausted(int(dr.count(cut)[0]) if isinstance(cut, mi.Bool) else cut, dr.width(L), limit)
     n = aa * aa
     if n > 1:
         # evaluate the shading once: each channel's block_reduce would otherwise launch

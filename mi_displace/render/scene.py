@@ -26,6 +26,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.core.backend import ensure_registered
 from mi_displace.core.dicing import fit_to_sensors
 from mi_displace.core.progress import bar as progress_bar
 
@@ -155,6 +156,7 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
     params = check_params(params)
     if mi.variant() is None:
         raise RuntimeError("no Mitsuba variant is set: call mi_displace.init() first")
+    ensure_registered()            # the plugins of the variant set now (after mi.set_variant)
     dr.sync_thread()
     start = time.perf_counter()
     try:

@@ -18,7 +18,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.core.properties import REQUIRED, Param, PluginSpec
-from mi_displace.core.texture_height import check_texture_finite
+from mi_displace.core.texture_height import check_texture_finite, warn_if_srgb
 from mi_displace.vdm import table
 from mi_displace.vdm.steps import placement_scale
 from mi_displace.core.collector import collector_paused
@@ -80,6 +80,7 @@ class MesostructureBSDF(mi.BSDF):
         """``values``: the plugin's parameters read by its spec (:data:`PARAMS` and its own)."""
         super().__init__(props)
         check_texture_finite(values["height"])
+        warn_if_srgb(values["height"], self.PLUGIN)
         self.nested = nested_bsdf(props, self.PLUGIN)
         self.height, self.depth, self.tile_size = values["height"], values["depth"], values["tile_size"]
         tiling = values["tiling"]

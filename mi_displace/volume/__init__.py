@@ -2,7 +2,7 @@
 
 objects (O_j and ∇O_j), maps (procedural inverse displacements D, α), displacement (D_k
 textures, placement M, composition), field (the displaced object, majorant, normals),
-slicing (the §4.2 renderer), isosurface (the surface reference), animation, cli.
+slicer (the §4.2 renderer), isosurface (the surface reference), animation, cli.
 """
 
 #: The smallest displaced volume with a map, as an XML fragment (id ``volume``): the

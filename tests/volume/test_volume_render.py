@@ -95,6 +95,9 @@ def test_bad_input(variant):
             _render(_scene("volume_slicer", vol, **props))
     with pytest.raises(RuntimeError, match="exactly one of"):
         mi.load_dict({"type": "displaced_volume"})
+    with pytest.raises(RuntimeError, match="displaced_volume: parameter 'to_world' is not supported"):
+        mi.load_dict({"type": "displaced_volume", "procedural": "piggy_bank", "resolution": 16,
+                      "to_world": mi.ScalarTransform4f().translate([1, 0, 0])})
     with pytest.raises(RuntimeError, match="singular"):
         mi.load_dict({"type": "displaced_volume", "procedural": "piggy_bank", "resolution": 16,
                       "map0_type": "wave", "map0_to_world": mi.ScalarTransform4f().scale([1, 0, 1])})
@@ -160,7 +163,7 @@ def test_fast_paths_agree_with_the_slow_ones(variant, monkeypatch, tilt):
     skipping, the shading branch and the shading's reuse of the density step's lookup change
     no bit against reading the D_k everywhere, twice per visible sample, and marching every
     slice."""
-    from mi_displace.volume import slicing
+    from mi_displace.volume import slicer
 
     m = mi.ScalarTransform4f().translate([0.0, -0.5, 0.0]).rotate([1, 0, 0], tilt).scale([0.5, 0.5, 0.5])
     vol = _volume(maps=[("gaussian", {"amount": 0.6})], map0_to_world=m)
@@ -188,7 +191,7 @@ def test_fast_paths_agree_with_the_slow_ones(variant, monkeypatch, tilt):
         assert np.array_equal(np.array(a), np.array(b))
     assert np.array_equal(np.array(fast.alpha), np.array(slow.alpha))
     everywhere = lambda v, s, lo, hi: (np.array([1, 1, 1]), mi.Float([0.0]))   # one occupied cell
-    monkeypatch.setattr(slicing, "occupancy", everywhere)
+    monkeypatch.setattr(slicer, "occupancy", everywhere)
     for kw, img in zip(props, images):                                  # shading reads the D_k again
         again = _render(_scene("volume_slicer", vol, reuse_lookup=False, **kw))
         assert img.max() > 0 and np.array_equal(img, again), kw
