@@ -587,12 +587,13 @@ def cornell_box(integrator: dict, res: int) -> mi.Scene:
 
 
 def area_sweep(res: int = 128, ref_spp: int = 4096, aa: int = 4,
-               counts=(1, 4, 16, 64, 256)) -> dict:
+               counts=(1, 4, 16, 64, 256), map_points: int = 16,
+               map_resolutions=(64, 256, 1024)) -> dict:
     """``area_samples`` against path (max_depth 2) on the Cornell box: FLIP, mean absolute
-    error and warm render time per count, with shadow rays; 16 points with a cube shadow
-    map each at a few ``area_shadow_resolution`` (FLIP also against the shadow-ray
-    image); the reference's noise floor (FLIP between its two halves) and path's own FLIP
-    and time at a few spp."""
+    error and warm render time per count, with shadow rays; ``map_points`` points with a
+    cube shadow map each at ``map_resolutions`` (FLIP also against the shadow-ray image
+    of as many points); the reference's noise floor (FLIP between its two halves) and
+    path's own FLIP and time at a few spp."""
     from mi_displace.evaluate.metrics import flip as flip_error
 
     path = cornell_box({"type": "path", "max_depth": 2}, res)
@@ -602,9 +603,9 @@ def area_sweep(res: int = 128, ref_spp: int = 4096, aa: int = 4,
               "noise_floor_flip": float(flip_error(halves[0], halves[1])[0]), "raster": [],
               "path": []}
     rays = {}
-    settings = [{"area_samples": n} for n in counts]
-    settings += [{"area_samples": 16, "shadows": "map", "area_shadow_resolution": r}
-                 for r in (64, 256, 1024)]
+    settings = [{"area_samples": n} for n in sorted(set(counts) | {map_points})]
+    settings += [{"area_samples": map_points, "shadows": "map", "area_shadow_resolution": r}
+                 for r in map_resolutions]
     for setting in settings:
         sc = cornell_box(dict({"type": "raster", "aa": aa}, **setting), res)
         img = _image(sc)
@@ -612,7 +613,7 @@ def area_sweep(res: int = 128, ref_spp: int = 4096, aa: int = 4,
                    mae=float(np.abs(img - reference).mean()),
                    render_s=median_time(lambda: _image(sc), 3))
         if "shadows" in setting:
-            row["flip_vs_shadow_rays"] = float(flip_error(rays[16], img)[0])
+            row["flip_vs_shadow_rays"] = float(flip_error(rays[map_points], img)[0])
         else:
             rays[setting["area_samples"]] = img
         record["raster"].append(row)
