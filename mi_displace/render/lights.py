@@ -8,8 +8,8 @@
   "many point lights" of a GPU): the points are the shape's own
   ``sample_position`` at a Hammersley pattern shifted by half a cell, so one sample is the
   centre of a rectangle's parameter domain; each shades like a point light with the
-  radiance the emitter sends toward the receiver (``eval_direction``).  With shadows, each
-  sample gets a shadow ray.
+  radiance the emitter sends toward the receiver (``eval_direction``) and its own hard
+  shadow (a shadow ray or a cube shadow map, :mod:`.raster`).
 * **Ambient lights** — unoccluded: ``constant`` adds albedo × L; ``envmap`` adds
   albedo × E(n)/π, with E the irradiance of its order-2 spherical-harmonic projection
   (Ramamoorthi & Hanrahan 2001, "An efficient representation for irradiance environment
@@ -50,7 +50,8 @@ def is_envmap(emitter: mi.Emitter) -> bool:
     return emitter.class_name() == "EnvironmentMapEmitter"
 
 
-#: Per GPU-style integrator: which emitters it draws, and the list its message names.
+#: Per GPU-style integrator: which emitters it draws, the list its message names and the
+#: Mitsuba integrator it suggests instead.
 DRAWS = {
     "raster": (lambda e: is_delta(e) or is_area(e) or is_constant(e) or is_envmap(e),
                "point, spot, directional, projector and area lights and constant/envmap "
