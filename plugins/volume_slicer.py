@@ -10,6 +10,7 @@ method.  ``mi.render`` returns a (height, width, 3) image; ``spp`` and ``seed`` 
 import mitsuba as mi
 
 from mi_displace.core.properties import REQUIRED, Param, PluginSpec
+from mi_displace.render import lights
 from mi_displace.volume import EXAMPLE_XML, slicer
 from mi_displace.volume.field import NORMALS
 from mi_displace.plugins._guard import constructor
@@ -46,7 +47,9 @@ SPEC = PluginSpec(
     <string name="model" value="surface"/>
 </integrator>""",
     stats="none (the frame is drawn at render time)",
-    limits="Deterministic single scattering only; `spp` and `seed` are ignored.",
+    limits="Deterministic single scattering only; `spp` and `seed` are ignored.  Draws delta "
+           "lights and `constant` ambient light; any other emitter (`area`, `envmap`, …) is "
+           "refused, naming it.",
 )
 
 
@@ -75,6 +78,11 @@ class VolumeSlicer(mi.SamplingIntegrator):
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
         return slicer.render(scene, sensor, self.plugin.volume, self.settings)
+
+    def setup_problem(self, scene) -> str | None:
+        """An emitter the slicer does not model (one line), or ``None``; scene loaders
+        call it after loading."""
+        return lights.emitter_problem(scene, "volume_slicer")
 
     def to_string(self):
         s = self.settings

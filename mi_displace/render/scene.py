@@ -146,7 +146,9 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
         FileNotFoundError: ``path`` does not exist.
         ValueError: Mitsuba rejects the scene or a parameter (message names the file), or
             the scene has no integrator or no sensor, or a shape's BSDF is not set up
-            (its ``setup_problem()``: a ``vdm`` without ``tile_size`` outside a ``vdm_mesh``).
+            (its ``setup_problem()``: a ``vdm`` without ``tile_size`` outside a ``vdm_mesh``),
+            or the integrator cannot render the scene (its ``setup_problem(scene)``: an
+            emitter ``raster`` does not model).
     """
     path = Path(path)
     if not path.is_file():
@@ -167,6 +169,10 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
         problem = getattr(shape.bsdf(), "setup_problem", lambda: None)()
         if problem:
             raise ValueError(f"scene {str(path)!r}: {problem}")
+    # an integrator that cannot render the scene (raster: an emitter it does not model)
+    problem = getattr(scene.integrator(), "setup_problem", lambda scene: None)(scene)
+    if problem:
+        raise ValueError(f"scene {str(path)!r}: {problem}")
     dr.sync_thread()
     build_s = time.perf_counter() - start
     for what, found in (("integrator", scene.integrator()), ("sensor", scene.sensors())):

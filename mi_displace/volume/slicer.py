@@ -37,7 +37,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.render.raster import _is_ambient, _is_delta, pixel_rays
+from mi_displace.render.lights import check as check_emitters, is_constant, is_delta
+from mi_displace.render.raster import pixel_rays
 from mi_displace.volume.displacement import Lookup
 from mi_displace.volume.field import NORMALS, AlbedoField, DisplacedVolume
 
@@ -220,15 +221,21 @@ def _slice_frame(sensor: mi.Sensor, lo, hi, spacing):
 
 
 def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSettings) -> mi.TensorXf:
-    """Render the displaced volume by slicing; returns a (height, width, 3) linear tensor."""
+    """Render the displaced volume by slicing; returns a (height, width, 3) linear tensor.
+
+    Raises:
+        ValueError: an emitter the slicer does not model (area lights, environment maps),
+            before anything renders.
+    """
+    check_emitters(scene, "volume_slicer")
     vol.prepare()
     if s.albedo_field is not None:
         s.albedo_field.prepare()
     lo, hi = vol.proxy_box()
     spacing = s.spacing * float(vol.obj.voxel_size.min())
     origin, forward, zmin, count = _slice_frame(sensor, lo, hi, spacing)
-    lights = [e for e in scene.emitters() if _is_delta(e)]
-    ambient = [e for e in scene.emitters() if _is_ambient(e)]
+    lights = [e for e in scene.emitters() if is_delta(e)]
+    ambient = [e for e in scene.emitters() if is_constant(e)]
     film = max(sensor.film().crop_size())
     gn, grid = light_grid(vol, s, lights, lo, hi, film) if (s.model == "scatter" or s.shadows) else (0, None)
     ray, weight, w, h = pixel_rays(sensor, s.aa)
@@ -336,7 +343,7 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
     si.wi = -ray.d
     env = mi.Color3f(0.0)
     for e in scene.emitters():
-        if not _is_delta(e):
+        if not is_delta(e):
             env += mi.Color3f(e.eval(si))
     L = (L + T * env) * weight
     n = s.aa * s.aa

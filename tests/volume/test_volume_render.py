@@ -103,6 +103,26 @@ def test_bad_input(variant):
                       "map0_type": "wave", "map0_to_world": mi.ScalarTransform4f().scale([1, 0, 1])})
 
 
+@pytest.mark.parametrize("light", ["area", "envmap"])
+def test_lights_the_slicer_cannot_draw_are_refused(variant, light, tmp_path):
+    """An area light or an environment map would leave the slices unlit: refused, naming
+    the emitter and the integrator, before anything renders."""
+    if light == "area":
+        emitter = {"type": "rectangle", "emitter": {"type": "area", "radiance": 5.0}}
+    else:
+        mi.Bitmap(np.full((8, 16, 3), 0.5, dtype=np.float32)).write(str(tmp_path / "env.exr"))
+        emitter = {"type": "envmap", "filename": str(tmp_path / "env.exr")}
+    sc = _scene("volume_slicer", _volume())
+    d = {"type": "scene", "integrator": {"type": "volume_slicer", "volume": _volume(),
+                                         "albedo": 0.8},
+         "sensor": sc.sensors()[0], "odd_light": emitter}
+    sc = mi.load_dict(d)
+    problem = sc.integrator().setup_problem(sc)
+    assert problem.startswith("volume_slicer: cannot draw emitter") and "\n" not in problem
+    with pytest.raises(ValueError, match="volume_slicer: cannot draw emitter"):
+        sc.integrator().render(sc, sc.sensors()[0])
+
+
 def test_traverse_edits_maps_without_rebuilding_the_object(variant):
     vol = _volume(maps=[("peel", {"angle": 10.0, "hinge": 1.0, "height": 0.5})])
     scene = _scene("volume_slicer", vol)
