@@ -26,6 +26,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.bake.mitsuba_frames import prepare_scene
 from mi_displace.core.dicing import redice
 from mi_displace.core.progress import bar as progress_bar
 
@@ -170,6 +171,7 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
         fit = getattr(shape, "fit_to_scene", None)
         if fit is not None:
             fit(scene)
+    prepare_scene(scene)           # BSDFs decoding in a frame of their own (mikk_normalmap)
     for shape in scene.shapes():   # a BSDF that cannot render what it models (vdm without a tile size)
         problem = getattr(shape.bsdf(), "setup_problem", lambda: None)()
         if problem:
