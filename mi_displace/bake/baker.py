@@ -31,6 +31,7 @@ import numpy as np
 
 from mi_displace.bake import diagnostics as diag
 from mi_displace.bake import formats, padding, unwrap
+from mi_displace.bake.fragments import write_fragments
 from mi_displace.bake.meshdata import (MeshData, check_mesh, edge_counts, load_mesh, save_obj,
                                        uv_triangle_stats, weld_ids)
 from mi_displace.bake.mikktspace import mikktspace
@@ -434,7 +435,8 @@ def split_channels(image: np.ndarray) -> dict:
 
 
 def write_outputs(result: BakeResult, out_dir: Path, map_formats, diagnostics_image: bool) -> None:
-    """Write ``low.obj``, every map with its sidecar, and the diagnostics image."""
+    """Write ``low.obj``, every map with its sidecar, the Mitsuba scene fragments
+    (:mod:`fragments`) and the diagnostics image."""
     start = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
     low = result.low
@@ -450,6 +452,7 @@ def write_outputs(result: BakeResult, out_dir: Path, map_formats, diagnostics_im
         path = formats.write_map(out_dir, f, result.maps, meta)
         files += [path.name, *formats.read_metadata(path).get("companions", {}).values()]
     files.append("valid.png")
+    files += write_fragments(out_dir, map_formats, low)
     if diagnostics_image:
         formats.write_png_raw(out_dir / "diagnostics.png", diag.image(result.status))
         files.append("diagnostics.png")

@@ -45,7 +45,7 @@ def add_commands(sub) -> dict:
                         "Hausdorff distance low -> high + 0.5%% of the diagonal)")
     p.add_argument("--padding", type=float, default=8, help="edge padding in texels (default 8)")
     p.add_argument("--formats", default=None,
-                   help="comma-separated map formats, or 'all' (default: d16,normal_tangent; "
+                   help="comma-separated map formats, or 'all' (default: d16,normal_tangent,normal_mitsuba; "
                         "valid.png, the mask, is always written)")
     p.add_argument("--diagnostics", action="store_true", help="diagnostics mode: overhang rays and diagnostics.png")
     p.add_argument("--cage", default=None, help="cage mesh with the low-poly's topology (Fig. 8)")

@@ -53,9 +53,10 @@ FORMATS = {
 FLOAT_COMPANIONS = {"normal": ("_normal", "normal_tangent"),
                     "direction": ("_direction", "direction_tangent"),
                     "back": ("_back", "back_depth")}
-#: what a user asks for most: 16-bit displacement and the tangent-space normal map (the
-#: validity mask ``valid.png`` is always written); ``--formats all`` writes every format
-DEFAULT_FORMATS = ("d16", "normal_tangent")
+#: what a user asks for most: 16-bit displacement and the tangent-space normal map in
+#: MikkTSpace and in Mitsuba's stock frame (the validity mask ``valid.png`` is always
+#: written); ``--formats all`` writes every format
+DEFAULT_FORMATS = ("d16", "normal_tangent", "normal_mitsuba")
 UV_CONVENTION = "texel (c, r) centre at u = (c + 0.5) / W, v = 1 - (r + 0.5) / H (v up, row 0 on top)"
 TANGENT_CONVENTION = ("MikkTSpace (genTangSpaceDefault) over the vertex normals written in low.obj; "
                       "bitangent = sign * cross(n, t) per pixel from the interpolated, unnormalised "
