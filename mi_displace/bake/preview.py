@@ -1,38 +1,43 @@
-"""A bake rendered in Mitsuba next to its high-poly: the normal map in each frame, FLIP per pixel.
+"""A bake rendered in Mitsuba next to its high-poly: each way to use it, FLIP per pixel.
 
-:func:`compare_normal_maps` renders the high-poly (the truth) and the low-poly of a bake
-under three normal-map BSDFs with Mitsuba's ``path`` integrator (one directional light,
+:func:`compare_bake` renders the high-poly (the truth) and the bake's scene fragments
+(:mod:`fragments`) with Mitsuba's ``path`` integrator (one directional light,
 ``max_depth`` 2: no noise but the pixel filter's), and measures the FLIP error of each
-against the high-poly, separately on pixels whose texel lies on a UV chart border and on
-the charts' interiors (a seam shows as a border error above the interior's):
+against the high-poly, over the whole image and separately on pixels whose texel lies on a
+UV chart border and inside the charts (a seam shows as a border error above the interior's):
 
 =================  ==============================================================
-``mikk``           ``mikk_normalmap`` on ``normal_tangent.png`` (MikkTSpace)
-``stock``          Mitsuba's ``normalmap`` on ``normal_mitsuba.png`` (its frame)
-``stock_on_mikk``  Mitsuba's ``normalmap`` on ``normal_tangent.png`` (the mismatch)
+``displaced``      ``mitsuba_displaced.xml`` (the displacement map, ``displaced``)
+``restored``       ``mitsuba_restored.xml`` (``restored``, ``levels="auto"``)
+``mikk``           ``mitsuba_normalmap.xml``: ``mikk_normalmap`` on ``normal_tangent.png``
+``stock``          ``mitsuba_normalmap_stock.xml``: ``normalmap`` on ``normal_mitsuba.png``
+``stock_on_mikk``  Mitsuba's ``normalmap`` on ``normal_tangent.png`` (the frame mismatch)
 ``no_map``         the low-poly with its own normals
 =================  ==============================================================
 
-Pixels within 3 pixels of either silhouette are left out of the border / interior means
-(the low-poly's outline is not the high-poly's, whatever the map).
+Ways whose files the bake did not write are skipped.  Pixels within 3 pixels of either
+silhouette are left out of the border / interior means (the low-poly's outline is not the
+high-poly's, whatever the map).  The chart border is measured on the low-poly's UVs (an
+AOV), so the displaced and restored surfaces are classified by the low-poly pixel under them.
 """
 from __future__ import annotations
 
+import tempfile
 from pathlib import Path
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
+from scipy.ndimage import binary_erosion
 
 from mi_displace.bake.meshdata import MeshData, load_mesh, save_obj
 from mi_displace.bake.mitsuba_frames import prepare_scene
 from mi_displace.bake.uv_raster import UVLayout, rasterize_rows
+from mi_displace.evaluate.metrics import flip
 
-#: name -> (BSDF plugin, map file) of the low-poly renders (None: no normal map)
-WAYS = {"mikk": ("mikk_normalmap", "normal_tangent.png"),
-        "stock": ("normalmap", "normal_mitsuba.png"),
-        "stock_on_mikk": ("normalmap", "normal_tangent.png"),
-        "no_map": (None, None)}
+#: name -> scene fragment, or (BSDF plugin, map file) on ``low.obj`` (None: no normal map)
+WAYS = {"displaced": "mitsuba_displaced.xml", "restored": "mitsuba_restored.xml",
+        "mikk": "mitsuba_normalmap.xml", "stock": "mitsuba_normalmap_stock.xml",
+        "stock_on_mikk": ("normalmap", "normal_tangent.png"), "no_map": (None, None)}
 
 
 def chart_border(covered: np.ndarray, width: float = 2) -> np.ndarray:
@@ -54,37 +59,54 @@ def _scene(shape: dict, centre, radius: float, res: int, light_dir) -> mi.Scene:
         "shape": shape})
 
 
-def compare_normal_maps(high: MeshData, out_dir, res: int = 128, spp: int = 16,
-                        border: float = 2, ways=tuple(WAYS)) -> dict:
-    """Render the bake in ``out_dir`` (``low.obj`` + its normal maps) against ``high``.
+def _shape(out_dir: Path, way) -> dict | mi.Shape | None:
+    """The shape of one way (None: its files are not in ``out_dir``)."""
+    if isinstance(way, str):
+        if not (out_dir / way).is_file():
+            return None
+        return mi.load_file(str(out_dir / way)).shapes()[0]
+    plugin, map_file = way
+    if map_file is not None and not (out_dir / map_file).is_file():
+        return None
+    bsdf = {"type": "diffuse"} if plugin is None else {
+        "type": plugin, "nested": {"type": "diffuse"},
+        "normalmap": {"type": "bitmap", "raw": True, "filename": str(out_dir / map_file)}}
+    return {"type": "obj", "filename": str(out_dir / "low.obj"), "bsdf": bsdf}
+
+
+def compare_bake(high: MeshData, out_dir, res: int = 128, spp: int = 16,
+                 border: float = 2, ways=tuple(WAYS)) -> dict:
+    """Render the bake in ``out_dir`` (its fragments, ``low.obj`` and maps) against ``high``.
 
     Args:
         high: the high-poly the bake was made from [object units].
-        out_dir: the bake's folder (needs ``normal_tangent`` / ``normal_mitsuba`` maps for
-            the ways that use them).
+        out_dir: the bake's folder.
         res: image side [pixels]; spp: samples per pixel; border: chart-border width [texels].
-        ways: names from :data:`WAYS`.
+        ways: names from :data:`WAYS` (those whose files are missing are skipped).
 
     Returns:
         ``{"reference": (res, res, 3) image, way: {"image", "flip_map" (res, res),
         "flip", "flip_border", "flip_interior", "border_pixels", "interior_pixels"}}``.
     """
-    out_dir = Path(out_dir)
+    out_dir = Path(out_dir).resolve()
     lo, hi = high.positions.min(0), high.positions.max(0)
     centre, radius = (lo + hi) / 2, float(np.linalg.norm(hi - lo) / 2)
     light = (-0.45, -0.35, -0.82)      # from the upper right, behind the camera
-    high_path = save_obj(out_dir / "preview_high.obj", high.positions, high.faces,
-                         normals=high.normals())
 
     def render(shape):
         scene = _scene(shape, centre, radius, res, light)
         prepare_scene(scene)
+        for shape in scene.shapes():     # restored levels="auto": the mi-displace loaders' hook
+            getattr(shape, "fit_to_scene", lambda scene: None)(scene)
         return np.asarray(mi.render(scene, spp=spp), np.float32)[..., :3]
 
-    reference = render({"type": "obj", "filename": str(high_path)})
-    low = {"type": "obj", "filename": str(out_dir / "low.obj")}
+    with tempfile.TemporaryDirectory() as tmp:
+        high_path = save_obj(Path(tmp) / "high.obj", high.positions, high.faces,
+                             normals=high.normals())
+        reference = render({"type": "obj", "filename": str(high_path)})
+
     # the texel under every pixel: the low-poly's UVs as an AOV
-    aov = _scene({**low}, centre, radius, res, light)
+    aov = _scene({"type": "obj", "filename": str(out_dir / "low.obj")}, centre, radius, res, light)
     uv = np.asarray(mi.render(aov, spp=1, integrator=mi.load_dict(
         {"type": "aov", "aovs": "uv:uv,hit:shape_index"})), np.float32)
     H, W = np.asarray(mi.Bitmap(str(out_dir / "valid.png"))).shape[:2]
@@ -97,20 +119,15 @@ def compare_normal_maps(high: MeshData, out_dir, res: int = 128, spp: int = 16,
     covered = covered.reshape(H, W)
     # pixels on both surfaces, 3 pixels clear of either silhouette (the low-poly's outline
     # differs from the high-poly's whatever the map)
-    from scipy.ndimage import binary_erosion
-
     inside = binary_erosion((uv[..., 2] >= 0) & (reference.sum(-1) > 0), iterations=3)
     at_border = chart_border(covered, border)[row, col] & inside
     interior = ~at_border & inside
-    from mi_displace.evaluate.metrics import flip
-
     result = {"reference": reference}
     for way in ways:
-        plugin, map_file = WAYS[way]
-        bsdf = {"type": "diffuse"} if plugin is None else {
-            "type": plugin, "nested": {"type": "diffuse"},
-            "normalmap": {"type": "bitmap", "raw": True, "filename": str(out_dir / map_file)}}
-        image = render({**low, "bsdf": bsdf})
+        shape = _shape(out_dir, WAYS[way])
+        if shape is None:
+            continue
+        image = render(shape)
         mean, error = flip(reference, image)
         result[way] = {"image": image, "flip_map": error, "flip": mean,
                        "flip_border": float(error[at_border].mean()),
