@@ -2,7 +2,8 @@
 
 * ``bake --high H [--low L] --res N --out DIR [--aa A] [--max-distance D] [--padding K]
   [--formats f1,f2] [--diagnostics] [--cage C | --cage-offset D] [--target-faces F]
-  [--smoothing S]`` -> maps + sidecars, ``low.obj``, ``valid.png``, ``bake.json``;
+  [--smoothing S] [--preview]`` -> maps + sidecars, ``low.obj``, ``valid.png``, Mitsuba
+  scene fragments ``mitsuba_*.xml``, ``bake.json`` (and ``preview.png`` / ``.json``);
 * ``restore --map DIR/MAP [--low L] [--levels K | --split N] --out M.(ply|obj)``;
 * ``meshdiff A B [--samples N] [--json]`` -> RMS and Hausdorff, both ways.
 """
@@ -53,6 +54,9 @@ def add_commands(sub) -> dict:
                    help="cage = low-poly pushed out along its normals by this distance")
     p.add_argument("--target-faces", type=_int, default=5000, help="faces of a generated low-poly")
     p.add_argument("--smoothing", type=_int, default=10, help="Taubin passes before simplifying")
+    p.add_argument("--preview", action="store_true",
+                   help="render the high-poly and every scene fragment side by side with FLIP "
+                        "(preview.png, preview.json)")
 
     p = sub.add_parser("restore", help="restore a detailed mesh from a low-poly and a map (§5)")
     p.add_argument("--map", required=True, help="baked map (its .json sidecar must lie beside it)")
@@ -97,7 +101,23 @@ def _cmd_bake(args) -> int:
           f"distance {c['beyond']}, nothing {c['miss']}); "
           f"bake {t['bake_s']:.3f} s (acceleration {t['accel_s']:.3f} s)\n"
           f"wrote {args.out}/bake.json and {len(r['files'])} files")
+    if args.preview:
+        _preview(args.high, args.out)
     return 0
+
+
+def _preview(high_path: str, out: str) -> None:
+    from mi_displace.bake.meshdata import load_mesh
+    from mi_displace.bake.preview import compare_bake, write_preview
+
+    with stage("rendering the preview"):
+        result = compare_bake(load_mesh(high_path, "high-poly"), out, res=256, spp=16)
+    png, _ = write_preview(result, out)
+    print("preview (FLIP against the high-poly: all / UV chart borders / chart interiors):")
+    for way, r in result.items():
+        if way != "reference":
+            print(f"  {way:14s} {r['flip']:.4f} / {r['flip_border']:.4f} / {r['flip_interior']:.4f}")
+    print(f"wrote {png}")
 
 
 def _cmd_restore(args) -> int:

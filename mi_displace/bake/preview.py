@@ -134,3 +134,20 @@ def compare_bake(high: MeshData, out_dir, res: int = 128, spp: int = 16,
                        "flip_interior": float(error[interior].mean()),
                        "border_pixels": int(at_border.sum()), "interior_pixels": int(interior.sum())}
     return result
+
+
+def write_preview(result: dict, out_dir) -> tuple[Path, Path]:
+    """``preview.png`` (top: the high-poly, then each way; bottom: each way's FLIP map, white =
+    1) and ``preview.json`` (the numbers) in ``out_dir``; returns both paths."""
+    import json
+
+    ways = [k for k in result if k != "reference"]
+    top = np.concatenate([result["reference"]] + [result[w]["image"] for w in ways], 1)
+    flips = [np.repeat(result[w]["flip_map"][..., None], 3, 2) for w in ways]
+    bottom = np.concatenate([np.zeros_like(result["reference"])] + flips, 1)
+    png = Path(out_dir) / "preview.png"
+    mi.util.write_bitmap(str(png), np.concatenate([top, bottom], 0))
+    numbers = {w: {k: v for k, v in result[w].items() if not isinstance(v, np.ndarray)} for w in ways}
+    js = Path(out_dir) / "preview.json"
+    js.write_text(json.dumps({"columns": ["high-poly", *ways], **numbers}, indent=2))
+    return png, js
