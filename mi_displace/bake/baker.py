@@ -32,8 +32,9 @@ import numpy as np
 from mi_displace.bake import diagnostics as diag
 from mi_displace.bake import formats, padding, unwrap
 from mi_displace.bake.fragments import write_fragments
-from mi_displace.bake.meshdata import (MeshData, check_mesh, edge_counts, load_mesh, save_obj,
-                                       uv_triangle_stats, weld_ids)
+from mi_displace.bake.meshdata import (MeshData, check_mesh, defect_summary, edge_counts,
+                                       face_defects, load_mesh, save_obj, uv_triangle_stats,
+                                       weld_ids)
 from mi_displace.bake.mikktspace import mikktspace
 from mi_displace.bake.trace import AMBIGUOUS, EMPTY, HighPoly, LowPolyDevice, OK, trace
 from mi_displace.bake.uv_raster import (OVERLAP_RESOLUTION, UVLayout, overlap_texels,
@@ -134,6 +135,10 @@ def prepare_inputs(high, low=None, target_faces: int = 5000, smoothing_iteration
     high = check_mesh(high, "high-poly") if isinstance(high, MeshData) else load_mesh(high, "high-poly")
     if low is not None:
         low = check_mesh(low, "low-poly") if isinstance(low, MeshData) else load_mesh(low, "low-poly")
+        defects = defect_summary(face_defects(low.positions, low.faces))
+        if defects:   # kept (its faces are the user's), but its normals and frame break there
+            warnings.warn(f"low-poly is not a 2-manifold: {defects}; vertex normals and the "
+                          "tangent frame are undefined there (remove those faces)", stacklevel=3)
     timings["load_s"] = time.perf_counter() - start
     if low is None:
         start = time.perf_counter()
