@@ -47,12 +47,13 @@ class MikkNormalMap(mi.BSDF):
         self.m_flags = int(self.nested.flags()) | int(mi.BSDFFlags.SpatiallyVarying)
         self.prepared = 0
 
-    def prepare_shape(self, shape: mi.Shape) -> None:
+    def prepare_shape(self, shape: mi.Shape) -> bool:
         """Add the MikkTSpace attributes to ``shape`` (once; ValueError naming it if it is not
-        a mesh with UVs and vertex normals)."""
-        if not shape.has_attribute(frames.ATTR_TANGENT):
-            frames.add_mikktspace(shape, shape.id())
+        a mesh with UVs and vertex normals); True when its vertices were split."""
         self.prepared += 1
+        if shape.has_attribute(frames.ATTR_TANGENT):
+            return False
+        return frames.add_mikktspace(shape, shape.id())
 
     def setup_problem(self) -> str | None:
         """One line when no shape was given the MikkTSpace frame (see :meth:`prepare_shape`)."""

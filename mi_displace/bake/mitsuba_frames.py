@@ -24,7 +24,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.bake.mikktspace import mikktspace, vertex_tangents
+from mi_displace.bake.mikktspace import mikktspace
 
 #: vertex attributes :func:`add_mikktspace` adds: (V, 3) tangent, (V,) sign, (V, 3) normal
 ATTR_TANGENT, ATTR_SIGN, ATTR_NORMAL = "vertex_mikk_tangent", "vertex_mikk_sign", "vertex_mikk_normal"
@@ -61,12 +61,17 @@ def _column(buffer, k: int) -> np.ndarray:
     return np.asarray(buffer).reshape(-1, k)
 
 
-def add_mikktspace(mesh: mi.Mesh, name: str = "mesh") -> None:
+def add_mikktspace(mesh: mi.Mesh, name: str = "mesh") -> bool:
     """Compute our MikkTSpace port on a loaded mesh (world space, as Mitsuba holds it) and
     add :data:`ATTR_TANGENT` (V, 3), :data:`ATTR_SIGN` (V,) and :data:`ATTR_NORMAL` (V, 3).
 
-    Per vertex: the space of each vertex's first corner (exact wherever a vertex's corners
-    share one MikkTSpace group; Mitsuba's OBJ reader already splits vertices at UV seams).
+    MikkTSpace is per face corner; Mitsuba interpolates per vertex.  A vertex whose corners
+    hold different spaces (a fan split by MikkTSpace's groups) is split into one vertex per
+    space, so the interpolated frame is the corner-exact one everywhere.
+
+    Returns:
+        True when vertices were split (the mesh changed: rebuild the scene's acceleration
+        structure, as :func:`prepare_scene` does).
 
     Raises:
         ValueError naming ``name`` when the mesh has no UVs or no vertex normals (the map
@@ -83,24 +88,48 @@ def add_mikktspace(mesh: mi.Mesh, name: str = "mesh") -> None:
                          "was baked over")
     p = _column(params["vertex_positions"], 3)
     n = _column(params["vertex_normals"], 3)
-    uv = _column(params["vertex_texcoords"], 2).copy()
-    uv[:, 1] = 1.0 - uv[:, 1]           # back to v up (MikkTSpace's and the baker's convention)
+    uv_mi = _column(params["vertex_texcoords"], 2)
+    uv = np.column_stack([uv_mi[:, 0], 1.0 - uv_mi[:, 1]])   # v up (MikkTSpace's, the baker's)
     faces = _column(params["faces"], 3).astype(np.int64)
     tangents, signs = mikktspace(p, faces, n, uv)
-    t, s = vertex_tangents(faces, tangents, signs, len(p))
+    # one vertex per (vertex, tangent, sign) of its corners, compared bit for bit
+    corner = np.column_stack([faces.reshape(-1, 1), tangents.reshape(-1, 3).view(np.int32),
+                              signs.reshape(-1, 1).view(np.int32)])
+    rows, first, inverse = np.unique(corner, axis=0, return_index=True, return_inverse=True)
+    vertex = rows[:, 0]
+    split = len(rows) != len(np.unique(faces))
+    if split:
+        params["vertex_positions"] = mi.Float(np.ascontiguousarray(p[vertex].ravel()))
+        params["vertex_normals"] = mi.Float(np.ascontiguousarray(n[vertex].ravel()))
+        params["vertex_texcoords"] = mi.Float(np.ascontiguousarray(uv_mi[vertex].ravel()))
+        params["faces"] = mi.UInt32(np.ascontiguousarray(inverse.ravel(), np.uint32))
+        params.update()
+    else:   # the corners agree: keep Mitsuba's vertex order
+        order = np.argsort(vertex)
+        first, vertex = first[order], vertex[order]
+        if len(vertex) != len(p):     # vertices no face uses: any frame (never interpolated)
+            full = np.zeros(len(p), np.int64)
+            full[vertex] = first
+            first = full
+    t = tangents.reshape(-1, 3)[first]
+    s = signs.ravel()[first]
     mesh.add_attribute(ATTR_TANGENT, 3, mi.Float(np.ascontiguousarray(t.ravel())))
     mesh.add_attribute(ATTR_SIGN, 1, mi.Float(np.ascontiguousarray(s)))
-    mesh.add_attribute(ATTR_NORMAL, 3, mi.Float(np.ascontiguousarray(n.ravel(), np.float32)))
+    mesh.add_attribute(ATTR_NORMAL, 3, mi.Float(np.ascontiguousarray(n[vertex if split else
+                                                                     slice(None)].ravel())))
+    return split
 
 
 def prepare_scene(scene: mi.Scene) -> int:
     """Give every shape whose BSDF decodes in a frame of its own (``prepare_shape``, the
     ``mikk_normalmap`` BSDF) that frame; call it after ``mi.load_file`` / ``mi.load_dict``
     (the mi-displace loader does).  Returns the number of shapes prepared."""
-    count = 0
+    count, changed = 0, False
     for shape in scene.shapes():
         prepare = getattr(shape.bsdf(), "prepare_shape", None)
         if prepare is not None:
-            prepare(shape)
+            changed |= bool(prepare(shape))
             count += 1
+    if changed:      # split vertices: the acceleration structure follows the new buffers
+        scene.parameters_changed([])
     return count
