@@ -102,21 +102,30 @@ def _cmd_bake(args) -> int:
           f"bake {t['bake_s']:.3f} s (acceleration {t['accel_s']:.3f} s)\n"
           f"wrote {args.out}/bake.json and {len(r['files'])} files")
     if args.preview:
-        _preview(args.high, args.out)
+        _preview(args.high, args.out, result)
     return 0
 
 
-def _preview(high_path: str, out: str) -> None:
+def _preview(high_path: str, out: str, bake_result) -> None:
     from mi_displace.bake.meshdata import load_mesh
-    from mi_displace.bake.preview import compare_bake, write_preview
+    from mi_displace.bake.preview import compare_bake, decode_errors, write_preview
+    from mi_displace.bake.trace import AMBIGUOUS, OK
 
     with stage("rendering the preview"):
         result = compare_bake(load_mesh(high_path, "high-poly"), out, res=256, spp=16)
-    png, _ = write_preview(result, out)
+        status = bake_result.status
+        decodes = decode_errors(out, bake_result.low, bake_result.maps["normal_object"],
+                                (status == OK) | (status == AMBIGUOUS))
+    png, _ = write_preview(result, out, decodes)
     print("preview (FLIP against the high-poly: all / UV chart borders / chart interiors):")
     for way, r in result.items():
         if way != "reference":
             print(f"  {way:14s} {r['flip']:.4f} / {r['flip_border']:.4f} / {r['flip_interior']:.4f}")
+    print("normals Mitsuba decodes at texel centres against the object-space bake "
+          "(degrees: mean / p99 / max, texels over 1 degree):")
+    for way, d in decodes.items():
+        print(f"  {way:14s} {d['mean_deg']:.3f} / {d['p99_deg']:.3f} / {d['max_deg']:.3f}, "
+              f"{d['over_1deg']} of {d['texels']}")
     print(f"wrote {png}")
 
 

@@ -25,11 +25,12 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
+import drjit as dr
 import mitsuba as mi
 import numpy as np
 from scipy.ndimage import binary_erosion
 
-from mi_displace.bake.meshdata import MeshData, load_mesh, save_obj
+from mi_displace.bake.meshdata import MeshData, load_mesh, save_obj, vertex_normals
 from mi_displace.bake.mitsuba_frames import prepare_scene
 from mi_displace.bake.uv_raster import UVLayout, rasterize_rows
 from mi_displace.evaluate.metrics import flip
@@ -38,6 +39,10 @@ from mi_displace.evaluate.metrics import flip
 WAYS = {"displaced": "mitsuba_displaced.xml", "restored": "mitsuba_restored.xml",
         "mikk": "mitsuba_normalmap.xml", "stock": "mitsuba_normalmap_stock.xml",
         "stock_on_mikk": ("normalmap", "normal_tangent.png"), "no_map": (None, None)}
+#: the normal-map ways decoded texel by texel (:func:`decode_errors`): (BSDF, map file)
+DECODES = {"mikk": ("mikk_normalmap", "normal_tangent.png"),
+           "stock": ("normalmap", "normal_mitsuba.png"),
+           "stock_on_mikk": ("normalmap", "normal_tangent.png")}
 
 
 def chart_border(covered: np.ndarray, width: float = 2) -> np.ndarray:
@@ -57,6 +62,80 @@ def _scene(shape: dict, centre, radius: float, res: int, light_dir) -> mi.Scene:
                             "rfilter": {"type": "box"}}},
         "sun": {"type": "directional", "direction": list(light_dir), "irradiance": 3.0},
         "shape": shape})
+
+
+def decoded_normals(out_dir, bsdf_type: str, map_file: str, low: MeshData, width: int,
+                    height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World normals the BSDF shades with at every texel centre inside a UV triangle.
+
+    A ray along -n hits the low-poly (loaded by Mitsuba from low.obj) at the texel's point;
+    the nested BSDF is a smooth mirror, so the sampled direction is the reflection of wi
+    about the decoded normal N: N = normalize(wi + wo).
+
+    Args:
+        out_dir: the bake's folder (``low.obj``, ``map_file``); bsdf_type: ``mikk_normalmap``
+            or ``normalmap``; low: the bake's low-poly; width, height: the map's size [texels].
+
+    Returns:
+        texel indices (N,) (row-major, row 0 on top), decoded unit normals (N, 3) (world =
+        object space), and (N,) bool: the ray met the texel's own triangle and the BSDF kept
+        the reflection."""
+    scene = mi.load_dict({"type": "scene", "low": {
+        "type": "obj", "filename": str(Path(out_dir) / "low.obj"),
+        "bsdf": {"type": bsdf_type, "normalmap": {"type": "bitmap", "raw": True,
+                                                  "filename": str(Path(out_dir) / map_file)},
+                 "nested": {"type": "conductor"}}}})
+    prepare_scene(scene)
+    s = rasterize_rows(UVLayout(low), width, height, 0, height, 1, conservative=False)
+    texel, f = np.asarray(s.texel, np.int64), np.asarray(s.prim, np.int64)
+    w = np.stack([1 - np.asarray(s.b1) - np.asarray(s.b2), np.asarray(s.b1), np.asarray(s.b2)], 1)
+    p = (low.positions[low.faces[f]] * w[..., None]).sum(1)
+    n = (vertex_normals(low.positions, low.faces)[low.faces[f]] * w[..., None]).sum(1)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    o = p + 1e-4 * low.diagonal * n
+    ray = mi.Ray3f(mi.Point3f(*(mi.Float(o[:, k].copy()) for k in range(3))),
+                   mi.Vector3f(*(mi.Float(-n[:, k].copy()) for k in range(3))))
+    si = scene.ray_intersect(ray)
+    bs, weight = si.bsdf().sample(mi.BSDFContext(), si, 0.5, mi.Point2f(0.5), si.is_valid())
+    decoded = dr.normalize(-ray.d + si.to_world(bs.wo))
+    # the texel's own triangle (a centre on an edge may hit the neighbour, across a seam
+    # another chart's texels), and a reflection the BSDF kept
+    ok = np.asarray(si.is_valid() & (dr.max(weight) > 0)) & (np.asarray(si.prim_index) == f)
+    return texel, np.stack([np.asarray(c) for c in decoded], 1), ok
+
+
+def decode_errors(out_dir, low: MeshData, normal_object: np.ndarray, measured: np.ndarray,
+                  border: float = 2) -> dict:
+    """Per-texel decode error of each normal-map way (:data:`DECODES`) against the bake's
+    object-space normals, at the texel centres inside a UV triangle.
+
+    Args:
+        normal_object: (H, W, 3) the bake's object-space normals (float, the truth).
+        measured: (H, W) bool, texels that found the high-poly.
+
+    Returns:
+        ``{way: {"texels", "max_deg", "p99_deg", "mean_deg", "over_1deg",
+        "border_mean_deg", "interior_mean_deg"}}`` for the ways whose map exists.
+    """
+    H, W = measured.shape
+    out = {}
+    for way, (plugin, map_file) in DECODES.items():
+        if not (Path(out_dir) / map_file).is_file():
+            continue
+        texel, n, ok = decoded_normals(out_dir, plugin, map_file, low, W, H)
+        use = ok & measured.ravel()[texel]
+        truth = normal_object.reshape(-1, 3)[texel[use]].astype(np.float64)
+        err = np.degrees(np.arctan2(np.linalg.norm(np.cross(n[use], truth), axis=1),
+                                    (n[use] * truth).sum(1)))
+        covered = np.zeros(H * W, bool)
+        covered[texel] = True
+        at_border = chart_border(covered.reshape(H, W), border).ravel()[texel[use]]
+        out[way] = {"texels": int(use.sum()), "max_deg": float(err.max()),
+                    "p99_deg": float(np.percentile(err, 99)), "mean_deg": float(err.mean()),
+                    "over_1deg": int((err > 1).sum()),
+                    "border_mean_deg": float(err[at_border].mean()),
+                    "interior_mean_deg": float(err[~at_border].mean())}
+    return out
 
 
 def _shape(out_dir: Path, way) -> dict | mi.Shape | None:
@@ -136,9 +215,10 @@ def compare_bake(high: MeshData, out_dir, res: int = 128, spp: int = 16,
     return result
 
 
-def write_preview(result: dict, out_dir) -> tuple[Path, Path]:
+def write_preview(result: dict, out_dir, decodes: dict | None = None) -> tuple[Path, Path]:
     """``preview.png`` (top: the high-poly, then each way; bottom: each way's FLIP map, white =
-    1) and ``preview.json`` (the numbers) in ``out_dir``; returns both paths."""
+    1) and ``preview.json`` (the numbers of ``result`` and, under ``decode``, ``decodes``
+    of :func:`decode_errors`) in ``out_dir``; returns both paths."""
     import json
 
     ways = [k for k in result if k != "reference"]
@@ -146,8 +226,9 @@ def write_preview(result: dict, out_dir) -> tuple[Path, Path]:
     flips = [np.repeat(result[w]["flip_map"][..., None], 3, 2) for w in ways]
     bottom = np.concatenate([np.zeros_like(result["reference"])] + flips, 1)
     png = Path(out_dir) / "preview.png"
-    mi.util.write_bitmap(str(png), np.concatenate([top, bottom], 0))
+    mi.util.write_bitmap(str(png), np.concatenate([top, bottom], 0), write_async=False)
     numbers = {w: {k: v for k, v in result[w].items() if not isinstance(v, np.ndarray)} for w in ways}
     js = Path(out_dir) / "preview.json"
-    js.write_text(json.dumps({"columns": ["high-poly", *ways], **numbers}, indent=2))
+    js.write_text(json.dumps({"columns": ["high-poly", *ways], **numbers,
+                              "decode": decodes or {}}, indent=2))
     return png, js

@@ -1,17 +1,16 @@
 """Baked normal maps decoded by Mitsuba: ``mikk_normalmap`` on the MikkTSpace map and the stock
 ``normalmap`` on the ``normal_mitsuba`` map reproduce the bake's object-space normals; the stock
 BSDF on the MikkTSpace map does not (issue 29's seams)."""
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
 from conftest import _sphere_mesh
 
 from mi_displace.bake.baker import bake
-from mi_displace.bake.meshdata import MeshData, vertex_normals
+from mi_displace.bake.meshdata import MeshData
 from mi_displace.bake.mitsuba_frames import prepare_scene
+from mi_displace.bake.preview import decoded_normals
 from mi_displace.bake.trace import OK
-from mi_displace.bake.uv_raster import UVLayout, rasterize_rows
 
 RES = 128
 
@@ -34,33 +33,7 @@ def charts_bake(sphere_pair, tmp_path):
 
 
 def _decoded_by_mitsuba(out_dir, bsdf_type, map_file, low):
-    """World normals the BSDF shades with at every texel centre inside a UV triangle.
-
-    A ray along -n hits the low-poly (loaded by Mitsuba from low.obj) at the texel's point;
-    the nested BSDF is a smooth mirror, so the sampled direction is the reflection of wi
-    about the decoded normal N: N = normalize(wi + wo).  Returns (texel index, N, ok)."""
-    scene = mi.load_dict({"type": "scene", "low": {
-        "type": "obj", "filename": str(out_dir / "low.obj"),
-        "bsdf": {"type": bsdf_type, "normalmap": {"type": "bitmap", "raw": True,
-                                                  "filename": str(out_dir / map_file)},
-                 "nested": {"type": "conductor"}}}})
-    prepare_scene(scene)
-    s = rasterize_rows(UVLayout(low), RES, RES, 0, RES, 1, conservative=False)
-    texel, f = np.asarray(s.texel, np.int64), np.asarray(s.prim, np.int64)
-    w = np.stack([1 - np.asarray(s.b1) - np.asarray(s.b2), np.asarray(s.b1), np.asarray(s.b2)], 1)
-    p = (low.positions[low.faces[f]] * w[..., None]).sum(1)
-    n = (vertex_normals(low.positions, low.faces)[low.faces[f]] * w[..., None]).sum(1)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    o = p + 1e-4 * low.diagonal * n
-    ray = mi.Ray3f(mi.Point3f(*(mi.Float(o[:, k].copy()) for k in range(3))),
-                   mi.Vector3f(*(mi.Float(-n[:, k].copy()) for k in range(3))))
-    si = scene.ray_intersect(ray)
-    bs, weight = si.bsdf().sample(mi.BSDFContext(), si, 0.5, mi.Point2f(0.5), si.is_valid())
-    decoded = dr.normalize(-ray.d + si.to_world(bs.wo))
-    # the texel's own triangle (a centre on an edge may hit the neighbour, across a seam
-    # another chart's texels), and a reflection the BSDF kept
-    ok = np.asarray(si.is_valid() & (dr.max(weight) > 0)) & (np.asarray(si.prim_index) == f)
-    return texel, np.stack([np.asarray(c) for c in decoded], 1), ok
+    return decoded_normals(out_dir, bsdf_type, map_file, low, RES, RES)
 
 
 @pytest.mark.parametrize("bsdf_type, map_file, tol_deg", [
