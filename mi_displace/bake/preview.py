@@ -65,7 +65,8 @@ def _scene(shape: dict, centre, radius: float, res: int, light_dir) -> mi.Scene:
 
 
 def decoded_normals(out_dir, bsdf_type: str, map_file: str, low: MeshData, width: int,
-                    height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    height: int, to_world: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World normals the BSDF shades with at every texel centre inside a UV triangle.
 
     A ray along -n hits the low-poly (loaded by Mitsuba from low.obj) at the texel's point;
@@ -74,14 +75,17 @@ def decoded_normals(out_dir, bsdf_type: str, map_file: str, low: MeshData, width
 
     Args:
         out_dir: the bake's folder (``low.obj``, ``map_file``); bsdf_type: ``mikk_normalmap``
-            or ``normalmap``; low: the bake's low-poly; width, height: the map's size [texels].
+            or ``normalmap``; low: the bake's low-poly; width, height: the map's size [texels];
+            to_world: (4, 4) similarity placing ``low.obj`` (None: identity); the rays follow.
 
     Returns:
-        texel indices (N,) (row-major, row 0 on top), decoded unit normals (N, 3) (world =
-        object space), and (N,) bool: the ray met the texel's own triangle and the BSDF kept
-        the reflection."""
+        texel indices (N,) (row-major, row 0 on top), decoded unit normals (N, 3) in world
+        space, and (N,) bool: the ray met the texel's own triangle and the BSDF kept the
+        reflection."""
+    m = np.eye(4) if to_world is None else np.asarray(to_world, np.float64)
     scene = mi.load_dict({"type": "scene", "low": {
         "type": "obj", "filename": str(Path(out_dir) / "low.obj"),
+        "to_world": mi.ScalarTransform4f(mi.ScalarMatrix4f(m.tolist())),
         "bsdf": {"type": bsdf_type, "normalmap": {"type": "bitmap", "raw": True,
                                                   "filename": str(Path(out_dir) / map_file)},
                  "nested": {"type": "conductor"}}}})
@@ -93,6 +97,8 @@ def decoded_normals(out_dir, bsdf_type: str, map_file: str, low: MeshData, width
     n = (vertex_normals(low.positions, low.faces)[low.faces[f]] * w[..., None]).sum(1)
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     o = p + 1e-4 * low.diagonal * n
+    o, n = o @ m[:3, :3].T + m[:3, 3], n @ m[:3, :3].T        # a similarity keeps n normal
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
     ray = mi.Ray3f(mi.Point3f(*(mi.Float(o[:, k].copy()) for k in range(3))),
                    mi.Vector3f(*(mi.Float(-n[:, k].copy()) for k in range(3))))
     si = scene.ray_intersect(ray)

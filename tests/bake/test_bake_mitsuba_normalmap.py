@@ -54,6 +54,25 @@ def test_mitsuba_decodes_the_object_space_normals(charts_bake, bsdf_type, map_fi
     assert err.max() < tol_deg, f"{bsdf_type} on {map_file}: max {err.max():.3f} deg"
 
 
+@pytest.mark.parametrize("bsdf_type, map_file", [("mikk_normalmap", "float_normal.exr"),
+                                                 ("normalmap", "normal_mitsuba.png")])
+def test_a_placed_low_poly_decodes_the_rotated_normals(charts_bake, bsdf_type, map_file):
+    """to_world = rotation, uniform scale and translation: the decoded normals are the
+    object-space ones rotated (the MikkTSpace frame is computed on the placed mesh)."""
+    r, out = charts_bake
+    from scipy.spatial.transform import Rotation
+
+    rotation = Rotation.from_rotvec(np.radians(50) * np.array([1, 2, 3]) / np.sqrt(14)).as_matrix()
+    to_world = np.eye(4)
+    to_world[:3, :3], to_world[:3, 3] = 2.5 * rotation, [0.3, -1.0, 2.0]
+    texel, n, ok = decoded_normals(out, bsdf_type, map_file, r.low, RES, RES, to_world)
+    use = ok & (r.status.ravel()[texel] == OK)
+    assert use.sum() > 0.95 * len(texel)
+    truth = r.maps["normal_object"].reshape(-1, 3)[texel][use] @ rotation.T
+    tol = 0.02 if map_file.endswith(".exr") else 0.6
+    assert _angle_deg(n[use], truth).max() < tol
+
+
 def test_stock_normalmap_on_the_mikktspace_map_is_wrong(charts_bake):
     """The failure the issue reports: Mitsuba's own frame is not MikkTSpace's."""
     r, out = charts_bake
