@@ -181,8 +181,8 @@ def compare_bake(high: MeshData, out_dir, res: int = 128, spp: int = 16,
     def render(shape):
         scene = _scene(shape, centre, radius, res, light)
         prepare_scene(scene)
-        for shape in scene.shapes():     # restored levels="auto": the mi-displace loaders' hook
-            getattr(shape, "fit_to_scene", lambda scene: None)(scene)
+        for placed in scene.shapes():    # restored levels="auto": the mi-displace loaders' hook
+            getattr(placed, "fit_to_scene", lambda scene: None)(scene)
         return np.asarray(mi.render(scene, spp=spp), np.float32)[..., :3]
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -193,7 +193,7 @@ def compare_bake(high: MeshData, out_dir, res: int = 128, spp: int = 16,
     # the texel under every pixel: the low-poly's UVs as an AOV
     aov = _scene({"type": "obj", "filename": str(out_dir / "low.obj")}, centre, radius, res, light)
     uv = np.asarray(mi.render(aov, spp=1, integrator=mi.load_dict(
-        {"type": "aov", "aovs": "uv:uv,hit:shape_index"})), np.float32)
+        {"type": "aov", "aovs": "uv:uv,depth:depth"})), np.float32)
     H, W = np.asarray(mi.Bitmap(str(out_dir / "valid.png"))).shape[:2]
     col = np.clip((uv[..., 0] * W).astype(np.int64), 0, W - 1)
     row = np.clip((uv[..., 1] * H).astype(np.int64), 0, H - 1)
@@ -204,7 +204,7 @@ def compare_bake(high: MeshData, out_dir, res: int = 128, spp: int = 16,
     covered = covered.reshape(H, W)
     # pixels on both surfaces, 3 pixels clear of either silhouette (the low-poly's outline
     # differs from the high-poly's whatever the map)
-    inside = binary_erosion((uv[..., 2] >= 0) & (reference.sum(-1) > 0), iterations=3)
+    inside = binary_erosion((uv[..., 2] > 0) & (reference.sum(-1) > 0), iterations=3)
     at_border = chart_border(covered, border)[row, col] & inside
     interior = ~at_border & inside
     result = {"reference": reference}
