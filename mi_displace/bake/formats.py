@@ -235,7 +235,8 @@ def read_map(path: str | os.PathLike) -> dict:
     Returns:
         dict with ``displacement`` (H, W) float32 [object units] (``None`` for pure normal
         maps), ``direction_tangent`` (H, W, 3) unit or ``None`` (along the normal),
-        ``normal_tangent`` (H, W, 3) or ``None``, ``back_depth`` or ``None``, ``meta``.
+        ``normal_tangent`` (H, W, 3) or ``None``, ``back_depth`` or ``None``, ``meta``;
+        the normal-map formats give their own key (``normal_mitsuba``, ``normal_object``).
     """
     meta = read_metadata(path)
     fmt, file = meta["format"], Path(meta["_path"])
@@ -244,7 +245,11 @@ def read_map(path: str | os.PathLike) -> dict:
     out = {"displacement": None, "direction_tangent": None, "normal_tangent": None,
            "back_depth": None, "meta": meta}
     if fmt == "float":
-        out["displacement"] = read_exr_channels(file)["Y"]
+        channels = read_exr_channels(file)
+        if "Y" not in channels:
+            raise ValueError(f"map file {str(file)!r} has no 'Y' channel (channels "
+                             f"{sorted(channels)}); bake it again")
+        out["displacement"] = channels["Y"]
         for key, file_name in meta.get("companions", {}).items():
             companion = file.parent / file_name
             if not companion.is_file():

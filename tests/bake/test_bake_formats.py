@@ -122,3 +122,10 @@ def test_every_file_the_baker_writes_opens_in_mitsuba(sphere_pair, tmp_path):
                             "filter_type": "nearest"})
     d = r.maps["displacement"][row, col]
     assert abs(d) > 0.01 and np.asarray(texture.eval_1(si))[0] == pytest.approx(d, abs=1e-6)
+
+
+def test_a_float_map_without_a_y_channel_is_named(tmp_path):
+    path = formats.write_map(tmp_path, "float", _maps(), {"low": "low.obj"})
+    formats.write_exr_channels(path, {"D": _maps()["displacement"]})   # channels Mitsuba cannot read
+    with pytest.raises(ValueError, match=r"float\.exr' has no 'Y' channel"):
+        formats.read_map(path)
