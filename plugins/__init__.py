@@ -22,6 +22,7 @@ PLUGIN_MODULES = [
     "mi_displace.plugins.horizon",
     "mi_displace.plugins.relief",
     "mi_displace.plugins.restored",
+    "mi_displace.plugins.mikk_normalmap",
     "mi_displace.plugins.slicing",
     "mi_displace.plugins.depth_object",
     "mi_displace.plugins.displaced_volume",

@@ -70,6 +70,10 @@ def _restored(extra):
     return lambda tmp, n: {"type": "restored", "map": str(BUNNY_MAP), "levels": 1, **extra(tmp)}
 
 
+def _mikk(extra):
+    return lambda tmp, n: {"type": "mikk_normalmap", "nested": {"type": "diffuse"}, **extra(tmp, n)}
+
+
 def _garbage_map(tmp_path: Path, suffix: str = ".png") -> str:
     """A garbage PNG (or EXR: the "float" format) next to a valid sidecar (so the image
     itself is what fails)."""
@@ -170,6 +174,11 @@ CASES = {
         "garbage_exr_file": (_restored(lambda t: {"map": _garbage_map(t, ".exr")}), "garbage.exr"),
         "missing_low": (_restored(lambda t: {"low": _missing(t, ".obj")}), "no_such_file.obj"),
         "garbage_low": (_restored(lambda t: {"low": _garbage(t, ".obj")}), "garbage.obj"),
+    },
+    "mikk_normalmap": {
+        "misspelt": (_mikk(lambda t, n: {"normalmap": n["cells"], "nromal_scale": 1.0}), "nromal_scale"),
+        "wrong_type": (_mikk(lambda t, n: {"normalmap": 3.0}), "normalmap"),
+        "missing_texture": (_mikk(lambda t, n: {}), "normalmap"),
     },
     "raster": {
         "misspelt": (_raster(lambda t: {"max_layer": 4}), "max_layer"),

@@ -31,16 +31,18 @@ import numpy as np
 
 from mi_displace.bake import diagnostics as diag
 from mi_displace.bake import formats, padding, unwrap
-from mi_displace.bake.meshdata import (MeshData, check_mesh, edge_counts, load_mesh, save_obj,
-                                       uv_triangle_stats, weld_ids)
+from mi_displace.bake.fragments import write_fragments
+from mi_displace.bake.meshdata import (MeshData, check_mesh, defect_summary, edge_counts,
+                                       face_defects, load_mesh, save_obj, uv_triangle_stats,
+                                       weld_ids)
 from mi_displace.bake.mikktspace import mikktspace
 from mi_displace.bake.trace import AMBIGUOUS, EMPTY, HighPoly, LowPolyDevice, OK, trace
 from mi_displace.bake.uv_raster import (OVERLAP_RESOLUTION, UVLayout, overlap_texels,
                                         rasterize_rows)
 
 CHUNK_SAMPLES = 1 << 20        # samples per block of rows (bounds device memory)
-BYTES_PER_TEXEL = 160          # host: maps, status, padding transform and encoded copies
-BYTES_PER_SAMPLE = 240         # device: samples, rays, intersections, interpolated frame
+BYTES_PER_TEXEL = 172          # host: maps, status, padding transform and encoded copies
+BYTES_PER_SAMPLE = 252         # device: samples, rays, intersections, interpolated frame
 MAX_RESOLUTION = 16384
 DISTANCE_MARGIN = 1.5           # default max_distance = margin x one-sided Hausdorff low -> high
 DISTANCE_FLOOR_REL = 0.005      # ... plus this fraction of the high-poly's diagonal
@@ -133,6 +135,10 @@ def prepare_inputs(high, low=None, target_faces: int = 5000, smoothing_iteration
     high = check_mesh(high, "high-poly") if isinstance(high, MeshData) else load_mesh(high, "high-poly")
     if low is not None:
         low = check_mesh(low, "low-poly") if isinstance(low, MeshData) else load_mesh(low, "low-poly")
+        defects = defect_summary(face_defects(low.positions, low.faces))
+        if defects:   # kept (its faces are the user's), but its normals and frame break there
+            warnings.warn(f"low-poly is not a 2-manifold: {defects}; vertex normals and the "
+                          "tangent frame are undefined there (remove those faces)", stacklevel=3)
     timings["load_s"] = time.perf_counter() - start
     if low is None:
         start = time.perf_counter()
@@ -188,7 +194,8 @@ class Baker:
 
     #: channels of the interleaved (H, W, C) result: name -> (first channel, count)
     CHANNELS = {"displacement": (0, 1), "normal_tangent": (1, 3), "normal_object": (4, 3),
-                "direction_tangent": (7, 3), "status": (10, 1), "back_depth": (11, 1)}
+                "direction_tangent": (7, 3), "normal_mitsuba": (10, 3), "status": (13, 1),
+                "back_depth": (14, 1)}
 
     def run(self, width: int, height: int, aa: int, max_distance: float, delta: float,
             dual_depth: bool, conservative: bool = True,
@@ -196,11 +203,11 @@ class Baker:
         """Bake all texels.
 
         Returns:
-            (H, W, C) float32 image with the channels :data:`CHANNELS` (C = 11, or 12 with
+            (H, W, C) float32 image with the channels :data:`CHANNELS` (C = 14, or 15 with
             the dual-depth back depth; status as a float code), and counts.
         """
         H, W = height, width
-        C = 12 if dual_depth else 11
+        C = 15 if dual_depth else 14
         # one device buffer for the whole map, viewed by NumPy without a copy at the end
         # (Dr.Jit's allocation cache reuses its pages on the next bake of the same size)
         flat = dr.empty(mi.Float, H * W * C)
@@ -233,13 +240,13 @@ class Baker:
 
 def _fill_empty(flat: mi.Float, first: int, n_tex: int, C: int, max_distance: float) -> None:
     """What :func:`_texel_average` writes for texels without samples, for a whole block:
-    displacement 0, +z for both normals and the direction, status ``empty``, back depth
+    displacement 0, +z for the normals and the direction, status ``empty``, back depth
     -max_distance."""
     idx = dr.arange(mi.UInt32, n_tex * C)
     c = idx % C
     first = dr.opaque(mi.UInt32, first)
     value = mi.Float(0.0)
-    for name in ("normal_tangent", "normal_object", "direction_tangent"):
+    for name in ("normal_tangent", "normal_object", "direction_tangent", "normal_mitsuba"):
         value = dr.select(c == Baker.CHANNELS[name][0] + 2, 1.0, value)     # the z component
     value = dr.select(c == Baker.CHANNELS["back_depth"][0], -max_distance, value)
     dr.scatter(flat, value, idx + first * C)
@@ -260,7 +267,8 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.
     average of the others.
     """
     hit = (r.status == OK) | (r.status == AMBIGUOUS)
-    values = [r.displacement, *r.normal_tangent, *r.normal_object, *r.direction_tangent]
+    values = [r.displacement, *r.normal_tangent, *r.normal_object, *r.direction_tangent,
+              *r.normal_mitsuba]
     if r.back_depth is not None:
         values.append(r.back_depth)
     # status: the worst of the samples that hit, if any did (an anti-aliased texel keeps its
@@ -295,9 +303,10 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.
     no = dr.select(has, mi.Vector3f(*sums[4:7]), mi.Vector3f(*fallback))
     no = dr.normalize(dr.select(dr.squared_norm(no) > 0, no, z))  # empty texels: +z
     dirn = dr.normalize(dr.select(has, mi.Vector3f(*sums[7:10]), z))
-    channels = [sums[0] * inv, *nt, *no, *dirn, mi.Float(dr.select(has, st_hit, st))]
+    nm = dr.normalize(dr.select(has, mi.Vector3f(*sums[10:13]), z))
+    channels = [sums[0] * inv, *nt, *no, *dirn, *nm, mi.Float(dr.select(has, st_hit, st))]
     if r.back_depth is not None:
-        channels.append(dr.select(has, sums[10] * inv, -max_distance))
+        channels.append(dr.select(has, sums[13] * inv, -max_distance))
     C = len(channels)
     base = (dr.arange(mi.UInt32, n_tex) + dr.opaque(mi.UInt32, first)) * C
     for c, v in enumerate(channels):
@@ -431,7 +440,8 @@ def split_channels(image: np.ndarray) -> dict:
 
 
 def write_outputs(result: BakeResult, out_dir: Path, map_formats, diagnostics_image: bool) -> None:
-    """Write ``low.obj``, every map with its sidecar, and the diagnostics image."""
+    """Write ``low.obj``, every map with its sidecar, the Mitsuba scene fragments
+    (:mod:`fragments`) and the diagnostics image."""
     start = time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
     low = result.low
@@ -442,8 +452,12 @@ def write_outputs(result: BakeResult, out_dir: Path, map_formats, diagnostics_im
             "cage": result.record["settings"]["cage"] or result.record["settings"]["cage_offset"]}
     formats.write_png_raw(out_dir / "valid.png", (result.maps["valid"] > 0.5).astype(np.uint8) * 255)
     meta["valid"] = "valid.png"
-    files = [str(formats.write_map(out_dir, f, result.maps, meta).name) for f in map_formats]
+    files = []
+    for f in map_formats:
+        path = formats.write_map(out_dir, f, result.maps, meta)
+        files += [path.name, *formats.read_metadata(path).get("companions", {}).values()]
     files.append("valid.png")
+    files += write_fragments(out_dir, map_formats, low)
     if diagnostics_image:
         formats.write_png_raw(out_dir / "diagnostics.png", diag.image(result.status))
         files.append("diagnostics.png")

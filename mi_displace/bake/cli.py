@@ -2,7 +2,8 @@
 
 * ``bake --high H [--low L] --res N --out DIR [--aa A] [--max-distance D] [--padding K]
   [--formats f1,f2] [--diagnostics] [--cage C | --cage-offset D] [--target-faces F]
-  [--smoothing S]`` -> maps + sidecars, ``low.obj``, ``valid.png``, ``bake.json``;
+  [--smoothing S] [--preview]`` -> maps + sidecars, ``low.obj``, ``valid.png``, Mitsuba
+  scene fragments ``mitsuba_*.xml``, ``bake.json`` (and ``preview.png`` / ``.json``);
 * ``restore --map DIR/MAP [--low L] [--levels K | --split N] --out M.(ply|obj)``;
 * ``meshdiff A B [--samples N] [--json]`` -> RMS and Hausdorff, both ways.
 """
@@ -45,7 +46,7 @@ def add_commands(sub) -> dict:
                         "Hausdorff distance low -> high + 0.5%% of the diagonal)")
     p.add_argument("--padding", type=float, default=8, help="edge padding in texels (default 8)")
     p.add_argument("--formats", default=None,
-                   help="comma-separated map formats, or 'all' (default: d16,normal_tangent; "
+                   help="comma-separated map formats, or 'all' (default: d16,normal_tangent,normal_mitsuba; "
                         "valid.png, the mask, is always written)")
     p.add_argument("--diagnostics", action="store_true", help="diagnostics mode: overhang rays and diagnostics.png")
     p.add_argument("--cage", default=None, help="cage mesh with the low-poly's topology (Fig. 8)")
@@ -53,6 +54,9 @@ def add_commands(sub) -> dict:
                    help="cage = low-poly pushed out along its normals by this distance")
     p.add_argument("--target-faces", type=_int, default=5000, help="faces of a generated low-poly")
     p.add_argument("--smoothing", type=_int, default=10, help="Taubin passes before simplifying")
+    p.add_argument("--preview", action="store_true",
+                   help="render the high-poly and every scene fragment side by side with FLIP "
+                        "(preview.png, preview.json)")
 
     p = sub.add_parser("restore", help="restore a detailed mesh from a low-poly and a map (§5)")
     p.add_argument("--map", required=True, help="baked map (its .json sidecar must lie beside it)")
@@ -97,7 +101,32 @@ def _cmd_bake(args) -> int:
           f"distance {c['beyond']}, nothing {c['miss']}); "
           f"bake {t['bake_s']:.3f} s (acceleration {t['accel_s']:.3f} s)\n"
           f"wrote {args.out}/bake.json and {len(r['files'])} files")
+    if args.preview:
+        _preview(args.high, args.out, result)
     return 0
+
+
+def _preview(high_path: str, out: str, bake_result) -> None:
+    from mi_displace.bake.meshdata import load_mesh
+    from mi_displace.bake.preview import compare_bake, decode_errors, write_preview
+    from mi_displace.bake.trace import AMBIGUOUS, OK
+
+    with stage("rendering the preview"):
+        result = compare_bake(load_mesh(high_path, "high-poly"), out, res=256, spp=16)
+        status = bake_result.status
+        decodes = decode_errors(out, bake_result.low, bake_result.maps["normal_object"],
+                                (status == OK) | (status == AMBIGUOUS))
+    png, _ = write_preview(result, out, decodes)
+    print("preview (FLIP against the high-poly: all / UV chart borders / chart interiors):")
+    for way, r in result.items():
+        if way != "reference":
+            print(f"  {way:14s} {r['flip']:.4f} / {r['flip_border']:.4f} / {r['flip_interior']:.4f}")
+    print("normals Mitsuba decodes at texel centres against the object-space bake "
+          "(degrees: mean / p99 / max, texels over 1 degree):")
+    for way, d in decodes.items():
+        print(f"  {way:14s} {d['mean_deg']:.3f} / {d['p99_deg']:.3f} / {d['max_deg']:.3f}, "
+              f"{d['over_1deg']} of {d['texels']}")
+    print(f"wrote {png}")
 
 
 def _cmd_restore(args) -> int:

@@ -21,11 +21,20 @@ format (file)             pixel   channels
 ``dual_d8_n16`` (.png)    RGBA 8  R front depth, G back depth (dual-depth relief), B,A
                                   normal x,y
 ``d16_n16`` (.png)        RGBA 8  R,G displacement high, low byte; B,A normal x,y
-``float`` (.exr)          float   D displacement, NX NY NZ normal, DX DY DZ direction,
-                                  B back depth (all float32, ZIP)
+``float`` (.exr)          Y 32    displacement; beside it ``float_normal.exr`` (RGB 32,
+                                  MikkTSpace normal), ``float_direction.exr`` (RGB 32)
+                                  and with the back depth ``float_back.exr`` (Y 32);
+                                  float32, ZIP, channels named as Mitsuba's ``bitmap``
+                                  reads them
 ``normal_tangent`` (.png) RGB 8   tangent-space normal map (MikkTSpace frame)
+``normal_mitsuba`` (.png) RGB 8   tangent-space normal map in the frame of Mitsuba's
+                                  stock ``normalmap`` BSDF (:mod:`mitsuba_frames`)
 ``normal_object`` (.png)  RGB 8   object-space normal map
 ========================  ======  =====================================================
+
+Every file opens as ``mi.load_dict({"type": "bitmap", "filename": ..., "raw": True})``.
+Vectors in the float EXRs are encoded like the PNGs' (``(x + 1) / 2``, what Mitsuba's
+``normalmap`` decodes).
 """
 from __future__ import annotations
 
@@ -38,11 +47,16 @@ import numpy as np
 FORMATS = {
     "d8": ".png", "d16": ".png", "dir24_d8": ".png", "dir16_d16": ".png", "d8_n24": ".png",
     "dual_d8_n16": ".png", "d16_n16": ".png", "float": ".exr",
-    "normal_tangent": ".png", "normal_object": ".png",
+    "normal_tangent": ".png", "normal_mitsuba": ".png", "normal_object": ".png",
 }
-#: what a user asks for most: 16-bit displacement and the tangent-space normal map (the
-#: validity mask ``valid.png`` is always written); ``--formats all`` writes every format
-DEFAULT_FORMATS = ("d16", "normal_tangent")
+#: the float format's companion EXRs: name -> (file suffix, map it holds)
+FLOAT_COMPANIONS = {"normal": ("_normal", "normal_tangent"),
+                    "direction": ("_direction", "direction_tangent"),
+                    "back": ("_back", "back_depth")}
+#: what a user asks for most: 16-bit displacement and the tangent-space normal map in
+#: MikkTSpace and in Mitsuba's stock frame (the validity mask ``valid.png`` is always
+#: written); ``--formats all`` writes every format
+DEFAULT_FORMATS = ("d16", "normal_tangent", "normal_mitsuba")
 UV_CONVENTION = "texel (c, r) centre at u = (c + 0.5) / W, v = 1 - (r + 0.5) / H (v up, row 0 on top)"
 TANGENT_CONVENTION = ("MikkTSpace (genTangSpaceDefault) over the vertex normals written in low.obj; "
                       "bitangent = sign * cross(n, t) per pixel from the interpolated, unnormalised "
@@ -177,13 +191,19 @@ def write_map(out_dir: Path, fmt: str, maps: dict, meta: dict) -> Path:
         side["displacement"] = {"offset": offset, "scale": scale, "bits": 8}
         write_png_raw(path, np.dstack([qf, qb, _unit8(nt[..., :2])]))
     elif fmt == "float":
-        ch = {"D": d, "NX": nt[..., 0], "NY": nt[..., 1], "NZ": nt[..., 2],
-              "DX": dirn[..., 0], "DY": dirn[..., 1], "DZ": dirn[..., 2]}
-        if maps.get("back_depth") is not None:
-            ch["B"] = maps["back_depth"]
-        write_exr_channels(path, ch)
+        write_exr_channels(path, {"Y": d})
+        side["companions"] = {}
+        for key, (suffix, name) in FLOAT_COMPANIONS.items():
+            value = maps.get(name)
+            if value is None:
+                continue
+            file = path.with_name(f"{path.stem}{suffix}.exr")
+            # vectors encoded (x + 1) / 2 like the PNGs (Mitsuba's normalmap decodes 2 c - 1)
+            write_exr_channels(file, {"Y": value} if value.ndim == 2 else
+                               {c: value[..., k] * 0.5 + 0.5 for k, c in enumerate("RGB")})
+            side["companions"][key] = file.name
         side["displacement"] = {"offset": 0.0, "scale": 1.0, "bits": 32}
-    elif fmt in ("normal_tangent", "normal_object"):
+    elif fmt in ("normal_tangent", "normal_mitsuba", "normal_object"):
         write_png_raw(path, _unit8(maps[fmt]))
         side["space"] = fmt.split("_")[1]
     side["tangent_convention"] = TANGENT_CONVENTION
@@ -215,7 +235,8 @@ def read_map(path: str | os.PathLike) -> dict:
     Returns:
         dict with ``displacement`` (H, W) float32 [object units] (``None`` for pure normal
         maps), ``direction_tangent`` (H, W, 3) unit or ``None`` (along the normal),
-        ``normal_tangent`` (H, W, 3) or ``None``, ``back_depth`` or ``None``, ``meta``.
+        ``normal_tangent`` (H, W, 3) or ``None``, ``back_depth`` or ``None``, ``meta``;
+        the normal-map formats give their own key (``normal_mitsuba``, ``normal_object``).
     """
     meta = read_metadata(path)
     fmt, file = meta["format"], Path(meta["_path"])
@@ -224,15 +245,24 @@ def read_map(path: str | os.PathLike) -> dict:
     out = {"displacement": None, "direction_tangent": None, "normal_tangent": None,
            "back_depth": None, "meta": meta}
     if fmt == "float":
-        ch = read_exr_channels(file)
-        out["displacement"] = ch["D"]
-        out["normal_tangent"] = _normalise(np.dstack([ch["NX"], ch["NY"], ch["NZ"]]))
-        out["direction_tangent"] = _normalise(np.dstack([ch["DX"], ch["DY"], ch["DZ"]]))
-        out["back_depth"] = ch.get("B")
+        channels = read_exr_channels(file)
+        if "Y" not in channels:
+            raise ValueError(f"map file {str(file)!r} has no 'Y' channel (channels "
+                             f"{sorted(channels)}); bake it again")
+        out["displacement"] = channels["Y"]
+        for key, file_name in meta.get("companions", {}).items():
+            companion = file.parent / file_name
+            if not companion.is_file():
+                raise FileNotFoundError(f"map file {str(companion)!r} (named by the metadata of "
+                                        f"{str(file)!r}) does not exist")
+            ch = read_exr_channels(companion)
+            name = FLOAT_COMPANIONS[key][1]
+            out[name] = ch["Y"] if "Y" in ch else _normalise(
+                np.dstack([ch[c] for c in "RGB"]) * 2.0 - 1.0)
         return _with_valid(out, meta)
     data = read_png_raw(file)
-    if fmt in ("normal_tangent", "normal_object"):
-        out["normal_tangent" if fmt == "normal_tangent" else "normal_object"] = _normalise(_from8(data[..., :3]))
+    if fmt in ("normal_tangent", "normal_mitsuba", "normal_object"):
+        out[fmt] = _normalise(_from8(data[..., :3]))
         return out
     q = meta["displacement"]
 

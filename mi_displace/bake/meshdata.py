@@ -151,6 +151,47 @@ def edge_counts(faces: np.ndarray, weld: np.ndarray) -> dict:
     return {"boundary_edges": int((count == 1).sum()), "non_manifold_edges": int((count > 2).sum())}
 
 
+def face_defects(positions: np.ndarray, faces: np.ndarray, area_rel: float = 1e-12) -> dict:
+    """Faces that break a 2-manifold, on welded vertices (UV-seam twins are one vertex).
+
+    Returns:
+        dict of int64 face-index arrays: ``duplicate`` (the same three vertices in the same
+        winding as an earlier face: all but the first), ``back_to_back`` (the same three
+        vertices in both windings: every face of such a set; a flap or a double-sided
+        pocket), ``zero_area`` (area <= ``area_rel`` x the bounding-box diagonal squared).
+    """
+    p = np.asarray(positions, np.float64)
+    w = weld_ids(positions)[np.asarray(faces, np.int64)]
+    first = np.argmin(w, axis=1)
+    rolled = np.take_along_axis(w, (first[:, None] + np.arange(3)) % 3, axis=1)
+    winding = rolled[:, 1] < rolled[:, 2]          # the cyclic order from the smallest vertex
+    _, group, count = np.unique(np.sort(w, axis=1), axis=0, return_inverse=True, return_counts=True)
+    group = group.ravel()
+    both = np.zeros(len(count), bool)
+    wound = np.zeros((len(count), 2), bool)
+    wound[group, winding.astype(np.int64)] = True
+    both = wound.all(1)
+    order = np.lexsort((np.arange(len(w)), group))
+    repeat = np.zeros(len(w), bool)
+    repeat[order[1:]] = group[order[1:]] == group[order[:-1]]
+    area = np.linalg.norm(np.cross(p[faces[:, 1]] - p[faces[:, 0]], p[faces[:, 2]] - p[faces[:, 0]]), axis=1) / 2
+    diagonal2 = float(np.sum((p.max(0) - p.min(0)) ** 2))
+    return {"duplicate": np.flatnonzero(repeat & ~both[group]),
+            "back_to_back": np.flatnonzero(both[group]),
+            "zero_area": np.flatnonzero(area <= area_rel * diagonal2)}
+
+
+def defect_summary(defects: dict, limit: int = 10) -> str:
+    """``defects`` of :func:`face_defects` as one phrase naming the first ``limit`` faces of
+    each kind ('' when there are none)."""
+    parts = []
+    for kind, faces in defects.items():
+        if len(faces):
+            named = ", ".join(str(f) for f in faces[:limit]) + (", ..." if len(faces) > limit else "")
+            parts.append(f"{len(faces)} {kind.replace('_', '-')} (faces {named})")
+    return "; ".join(parts)
+
+
 def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(V, 3) float32 area-weighted vertex normals, summed over welded twins (alias buffer)."""
     p = np.asarray(positions, np.float64)

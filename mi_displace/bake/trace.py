@@ -38,6 +38,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.bake.meshdata import MeshData, weld_ids
+from mi_displace.bake.mitsuba_frames import stock_frame
 from mi_displace.core.tessellate import gather as _gather_all
 
 # Per-sample status, ordered so that the largest code is the worst (texel status = max).
@@ -108,6 +109,7 @@ class LowPolyDevice:
         """``tangents`` (F, 3, 3) and ``signs`` (F, 3): per face corner (MikkTSpace)."""
         self.faces = [mi.UInt32(low.faces[:, k].astype(np.uint32)) for k in range(3)]
         self.p = _vec(low.positions, mi.Point3f)
+        self.uv = _vec(low.uvs, mi.Point2f)
         self.n = _vec(normals)
         self.t = _vec(np.asarray(tangents, np.float32).reshape(-1, 3))
         self.sign = mi.Float(np.asarray(signs, np.float32).ravel())
@@ -129,6 +131,12 @@ class LowPolyDevice:
         q = None if self.cage is None else lerp(mi.Point3f, self.cage, f)
         return p, n, t, s * dr.cross(n, t), q
 
+    def stock_frame(self, prim, n):
+        """Mitsuba's ``normalmap`` frame ``(s, t)`` at the samples (``n``: unit normal)."""
+        f = [dr.gather(mi.UInt32, self.faces[k], prim) for k in range(3)]
+        return stock_frame(*(gather(mi.Point3f, self.p, i) for i in f),
+                           *(gather(mi.Point2f, self.uv, i) for i in f), n)
+
 
 @dataclass
 class TraceResult:
@@ -138,6 +146,7 @@ class TraceResult:
     displacement: mi.Float          # signed, object units
     normal_object: mi.Vector3f      # high-poly shading normal (object space), unit
     normal_tangent: mi.Vector3f     # the same in the low-poly's tangent frame, unit
+    normal_mitsuba: mi.Vector3f     # the same in Mitsuba's normalmap frame (s, t, n), unit
     direction_tangent: mi.Vector3f  # displacement direction in the tangent frame, unit
     back_depth: mi.Float | None     # dual-depth: signed displacement of the surface behind
 
@@ -227,4 +236,7 @@ def trace(high: HighPoly, low: LowPolyDevice, prim, b1, b2, max_distance: float,
     # along the normal the direction is the tangent frame's z axis by construction
     dir_ts = (_tangent_space(t, b, n_raw, direction) if q is not None
               else mi.Vector3f(dr.zeros(mi.Float, dr.width(d)), 0.0, 1.0))
-    return TraceResult(status, d, n_high, _tangent_space(t, b, n_raw, n_high), dir_ts, back)
+    s_m, t_m = low.stock_frame(prim, n)
+    n_mitsuba = mi.Vector3f(dr.dot(n_high, s_m), dr.dot(n_high, t_m), dr.dot(n_high, n))
+    return TraceResult(status, d, n_high, _tangent_space(t, b, n_raw, n_high), n_mitsuba,
+                       dir_ts, back)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mi_displace.bake.meshdata import MeshData, check_mesh
+from mi_displace.bake.meshdata import MeshData, check_mesh, defect_summary, face_defects
 
 
 def unwrap(mesh: MeshData, padding: int = 2, resolution: int = 1024) -> MeshData:
@@ -66,11 +66,16 @@ def make_low_poly(high: MeshData, target_faces: int = 5000, smoothing_iterations
         trimesh.smoothing.filter_taubin(tm, lamb=0.5, nu=0.53, iterations=int(smoothing_iterations))
     reduction = 1.0 - target_faces / len(tm.faces)
     points, faces = fast_simplification.simplify(tm.vertices, tm.faces, target_reduction=reduction)
+    notes = [f"made from the high-poly: {smoothing_iterations} Taubin smoothing passes, "
+             f"fast-simplification to {len(faces)} triangles"]
+    # a decimation can leave faces no 2-manifold has: drop them (and the vertices only they use)
+    defects = face_defects(points.astype(np.float32), faces)
+    if any(len(f) for f in defects.values()):
+        faces = np.delete(faces, np.concatenate(list(defects.values())), axis=0)
+        notes.append(f"removed {defect_summary(defects)}")
     keep = np.unique(faces)
     remap = np.full(len(points), -1)
     remap[keep] = np.arange(len(keep))
     low = MeshData(points[keep].astype(np.float32), remap[faces].astype(np.int64), None,
-                   name=f"{high.name}_low",
-                   notes=[f"made from the high-poly: {smoothing_iterations} Taubin smoothing passes, "
-                          f"fast-simplification to {len(faces)} triangles"])
+                   name=f"{high.name}_low", notes=notes)
     return check_mesh(low, "simplified low-poly")

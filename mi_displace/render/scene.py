@@ -26,6 +26,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.bake.mitsuba_frames import prepare_scene
 from mi_displace.core.backend import ensure_registered
 from mi_displace.core.dicing import fit_to_sensors
 from mi_displace.core.progress import bar as progress_bar
@@ -165,6 +166,7 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
         fit_to_sensors(scene)
     except RuntimeError as e:
         raise _translate_load_error(path, e) from None
+    prepare_scene(scene)           # BSDFs decoding in a frame of their own (mikk_normalmap)
     for shape in scene.shapes():   # a BSDF that cannot render what it models (vdm without a tile size)
         problem = getattr(shape.bsdf(), "setup_problem", lambda: None)()
         if problem:

@@ -32,7 +32,9 @@ def test_bake_cli_defaults_progress_and_provenance(sphere_pair, tmp_path, capsys
                   "bake: padding", "bake: wrote"):
         assert stage in out, stage
     files = sorted(p.name for p in (tmp_path / "b").iterdir())
-    assert files == ["bake.json", "d16.png", "d16.png.json", "low.obj", "normal_tangent.png",
+    assert files == ["bake.json", "d16.png", "d16.png.json", "low.obj", "mitsuba_displaced.xml",
+                     "mitsuba_normalmap.xml", "mitsuba_normalmap_stock.xml", "mitsuba_restored.xml",
+                     "normal_mitsuba.png", "normal_mitsuba.png.json", "normal_tangent.png",
                      "normal_tangent.png.json", "valid.png"]
     rec = json.loads((tmp_path / "b" / "bake.json").read_text())
     assert rec["inputs"]["high"] == str(tmp_path / "high.obj")

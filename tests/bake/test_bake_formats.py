@@ -15,7 +15,7 @@ def _maps(h=16, w=24, seed=0):
         v[..., 2] = np.abs(v[..., 2]) + z_min
         return (v / np.linalg.norm(v, axis=-1, keepdims=True)).astype(np.float32)
     return {"displacement": d, "normal_tangent": unit(0.5), "normal_object": unit(-1.0),
-            "direction_tangent": unit(0.5), "back_depth": (d - 0.2).astype(np.float32)}
+            "normal_mitsuba": unit(0.5), "direction_tangent": unit(0.5), "back_depth": (d - 0.2).astype(np.float32)}
 
 
 #: displacement bits of each quantised format (the §1.2 table), independent of the sidecar
@@ -39,7 +39,7 @@ def check_round_trip(tmp_path, fmt):
         assert err <= 0.5 * step + 1e-6, (fmt, err, step)
         assert np.all(np.isfinite(out["displacement"]))
     one_byte = 2.0 / 255  # one 8-bit step of a [-1, 1] component
-    for key in ("normal_tangent", "direction_tangent", "back_depth", "normal_object"):
+    for key in ("normal_tangent", "direction_tangent", "back_depth", "normal_object", "normal_mitsuba"):
         if out.get(key) is not None:
             tol = 1e-6 if fmt == "float" else (3 * one_byte if key != "back_depth" else 0.5 * step + 1e-6)
             assert np.abs(out[key] - maps[key]).max() <= tol, (fmt, key)
@@ -93,4 +93,39 @@ def test_bad_input(tmp_path, variant):
         formats.read_map(path)
     (tmp_path / "d8.png.json").write_text("{not json")
     with pytest.raises(ValueError, match="not valid JSON"):
+        formats.read_map(path)
+
+
+def test_every_file_the_baker_writes_opens_in_mitsuba(sphere_pair, tmp_path):
+    """Issue 29: each map (every format, the mask, the diagnostics image) is a texture
+    Mitsuba's ``bitmap`` loads, and it returns the stored values: a displacement texel of
+    the float map reads back as the bake's displacement."""
+    import mitsuba as mi
+
+    from mi_displace.bake.baker import bake
+
+    high, low = sphere_pair
+    r = bake(high, low, res=32, out_dir=tmp_path, map_formats="all", diagnostics=True,
+             max_distance=0.2, pad=2)
+    images = sorted(p for p in tmp_path.iterdir() if p.suffix in (".png", ".exr"))
+    assert {p.name for p in images} == {f for f in r.record["files"] if f.endswith((".png", ".exr"))}
+    assert len(images) >= len(formats.FORMATS) + 2
+    row, col = np.unravel_index(np.argmax(np.abs(r.maps["displacement"])), (32, 32))
+    si = mi.SurfaceInteraction3f()
+    si.uv = mi.Point2f(float(col + 0.5) / 32, float(row + 0.5) / 32)   # that texel's centre (v down)
+    for path in images:
+        texture = mi.load_dict({"type": "bitmap", "filename": str(path), "raw": True,
+                                "filter_type": "nearest"})
+        value = np.asarray(texture.eval(si)).ravel()
+        assert np.all(np.isfinite(value)), path.name
+    texture = mi.load_dict({"type": "bitmap", "filename": str(tmp_path / "float.exr"), "raw": True,
+                            "filter_type": "nearest"})
+    d = r.maps["displacement"][row, col]
+    assert abs(d) > 0.01 and np.asarray(texture.eval_1(si))[0] == pytest.approx(d, abs=1e-6)
+
+
+def test_a_float_map_without_a_y_channel_is_named(tmp_path):
+    path = formats.write_map(tmp_path, "float", _maps(), {"low": "low.obj"})
+    formats.write_exr_channels(path, {"D": _maps()["displacement"]})   # channels Mitsuba cannot read
+    with pytest.raises(ValueError, match=r"float\.exr' has no 'Y' channel"):
         formats.read_map(path)

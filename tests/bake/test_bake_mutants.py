@@ -448,7 +448,7 @@ def test_a_constant_map_round_trips_in_every_format(tmp_path):
 
     n = np.dstack([np.zeros((4, 6, 2)), np.ones((4, 6, 1))]).astype(np.float32)
     maps = {"displacement": np.full((4, 6), 0.25, np.float32), "normal_tangent": n,
-            "normal_object": n, "direction_tangent": n, "back_depth": np.full((4, 6), 0.25, np.float32)}
+            "normal_object": n, "normal_mitsuba": n, "direction_tangent": n, "back_depth": np.full((4, 6), 0.25, np.float32)}
     import warnings
 
     for fmt in formats.FORMATS:
