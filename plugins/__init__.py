@@ -37,6 +37,7 @@ VARIANT_MODULES = [
     "mi_displace.vdm.mesostructure",
     "mi_displace.vdm.bsdfs",
     "mi_displace.slicing.bsdf",
+    "mi_displace.bake.normalmap_bsdf",
 ]
 
 _registered_for: str | None = None

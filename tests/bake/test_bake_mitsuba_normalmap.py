@@ -83,21 +83,23 @@ def test_stock_normalmap_on_the_mikktspace_map_is_wrong(charts_bake):
 
 
 def test_mikk_normalmap_bad_input(variant, tmp_path):
-    with pytest.raises(Exception, match="mikk_normalmap: 'normalmap'"):
+    with pytest.raises(Exception, match="mikk_normalmap: parameter 'normalmap'"):
         mi.load_dict({"type": "mikk_normalmap", "nested": {"type": "diffuse"}})
     def tex():
         return {"type": "bitmap", "data": mi.TensorXf(np.full((2, 2, 3), 0.5, np.float32)), "raw": True}
     with pytest.raises(Exception, match="exactly one nested BSDF"):
         mi.load_dict({"type": "mikk_normalmap", "normalmap": tex()})
-    # a scene rendered without prepare_scene: one line naming the fix, not a wrong image
+    # a scene rendered without prepare_scene: one warning naming the fix, the unperturbed
+    # material (never zeros read as a frame, never an exception inside a trace)
     scene = mi.load_dict({"type": "scene", "s": {
         "type": "rectangle", "bsdf": {"type": "mikk_normalmap", "normalmap": tex(),
                                       "nested": {"type": "diffuse"}}},
         "light": {"type": "constant"}, "integrator": {"type": "path"},
         "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4},
                    "to_world": mi.ScalarTransform4f().look_at([0, 0, 3], [0, 0, 0], [0, 1, 0])}})
-    with pytest.raises(Exception, match="prepare_scene"):
-        scene.integrator().render(scene, scene.sensors()[0], spp=1)
+    with pytest.warns(UserWarning, match="prepare_scene"):
+        img = np.asarray(scene.integrator().render(scene, scene.sensors()[0], spp=1))
+    assert np.isfinite(img).all() and img.mean() > 0
     with pytest.raises(ValueError, match="not a triangle mesh|no UVs"):
         prepare_scene(scene)
 
