@@ -304,12 +304,14 @@ def _cmd_showcase(args) -> int:
 
 
 def bench_names() -> list[str]:
-    """Modules available under ``mi_displace.bench``."""
+    """Benchmark modules under ``mi_displace.bench`` (not its private helpers, not the
+    ``peers`` subpackage)."""
     try:
         package = importlib.import_module("mi_displace.bench")
     except ModuleNotFoundError:
         return []
-    return sorted(m.name for m in pkgutil.iter_modules(package.__path__) if not m.name.startswith("_"))
+    return sorted(m.name for m in pkgutil.iter_modules(package.__path__)
+                  if not m.name.startswith("_") and not m.ispkg)
 
 
 def _cmd_bench(args) -> int:
