@@ -117,7 +117,7 @@ class GLSlices:
 
     def __init__(self, sm, height: np.ndarray, mvp: np.ndarray, width: int, height_px: int,
                  light=(0.6, -0.4, 0.7), albedo=(0.72, 0.42, 0.3), ambient=0.15):
-        import moderngl
+        moderngl = require("moderngl")
 
         self.ctx = ctx = context()
         self.prog = ctx.program(vertex_shader=SLICE_VERTEX, fragment_shader=SLICE_FRAGMENT)
@@ -140,7 +140,7 @@ class GLSlices:
 
     def frame(self) -> None:
         """Draw one frame: clear, all slices, finish (``ctx.finish``: the work is done)."""
-        import moderngl
+        moderngl = require("moderngl")
 
         self.fbo.use()
         self.ctx.enable(moderngl.DEPTH_TEST)
@@ -174,7 +174,7 @@ def mesh_frame(positions: np.ndarray, normals: np.ndarray, faces: np.ndarray,
         (the same with the vertex upload), the renderer, its thread count and ``image``
         ((res, res, 3) float32, row 0 at the top).
     """
-    import moderngl
+    moderngl = require("moderngl")
 
     near, far = 0.1, 100.0
     f = 1 / np.tan(np.radians(fov_deg) / 2)
