@@ -24,7 +24,6 @@ from __future__ import annotations
 import gc
 import json as _json
 import os
-import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -32,6 +31,8 @@ from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
+
+from mi_displace.bench._timing import median_time
 
 SCENE = Path(__file__).resolve().parents[2] / "scenes" / "vdm_torus.xml"
 TARGETS = {"build_time_s": 10.0, "render_time_warm_s": 0.3, "compression_ratio": 10.0}
@@ -52,19 +53,12 @@ QUICK = Sizes(64, 32, 2, {"resolution": 256, "vdm_res": 16, "vdm_phi": 8, "vdm_t
                           "vdm_curvatures": 4})
 
 
-def _median_render(scene, repeats=5) -> float:
+def _median_render(scene, repeats: int) -> float:
+    """Warm median seconds of a raster render (one sample per pixel) of ``scene``."""
     from mi_displace.render import raster
 
     sensor = scene.sensors()[0]
-    times = []
-    for _ in range(repeats + 1):
-        dr.sync_thread()
-        start = time.perf_counter()
-        img = raster.render(scene, sensor, aa=1)
-        dr.eval(img)
-        dr.sync_thread()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times[1:])
+    return median_time(lambda: dr.eval(raster.render(scene, sensor, aa=1)), repeats)
 
 
 def run(sizes: Sizes = FULL) -> dict:
