@@ -6,7 +6,7 @@
   runs the comparison protocol (:mod:`mi_displace.evaluate.compare`); ``--quick`` caps the
   reference at :data:`QUICK_MAX_SPP` samples per pixel, as for ``showcase``.
 * ``showcase --out DIR [--quick] [--scenes DIR] [--max-spp N]`` compares every scene marked
-  ``<!-- showcase -->`` under the repository's ``scenes/`` folder (or ``--scenes``), writes
+  ``<!-- showcase -->`` under the packaged scene folder (or ``--scenes``), writes
   ``DIR/<scene>/...`` and ``DIR/summary.md`` and prints the summary table.  ``--quick``
   caps the reference at :data:`QUICK_MAX_SPP` samples per pixel.
 * ``bench NAME [--json] [--quick] [--out DIR]`` runs ``mi_displace.bench.NAME.main(json=...,
@@ -20,9 +20,9 @@ Long work reports a line per stage with its time on stderr when stderr is a term
 (:mod:`mi_displace.core.progress`); ``--quiet`` silences it, ``MI_DISPLACE_PROGRESS=1``
 forces it into logs.
 
-Bad input (missing file, bad parameter, unknown name, a variant this machine lacks) prints
-one line to stderr and exits with status 2, like argparse's own usage errors; a missing or
-too old LLVM exits with 1.  Any other exception is a bug in mi_displace: its traceback is
+Bad input (missing file, bad parameter, unknown name, a variant this machine lacks, an option
+whose extra is not installed) prints one line to stderr and exits with status 2, like
+argparse's own usage errors; a missing or too old LLVM exits with 1.  Any other exception is a bug in mi_displace: its traceback is
 printed with a line asking to report it (:data:`BUG_HINT`), exit status 1.
 """
 from __future__ import annotations
@@ -70,8 +70,10 @@ class UsageError(ValueError):
 
 
 def default_scenes_dir() -> Path:
-    """The repository's ``scenes/`` folder, next to the ``mi_displace`` package."""
-    return Path(__file__).resolve().parents[1] / "scenes"
+    """The packaged scene folder (:func:`mi_displace.core.resources.scenes_dir`)."""
+    from mi_displace.core.resources import scenes_dir
+
+    return scenes_dir()
 
 
 def _define(text: str) -> tuple[str, str]:
@@ -340,6 +342,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     import mi_displace
     from mi_displace.core.backend import LLVMVersionError
+    from mi_displace.core.extras import MissingExtraError
 
     args = build_parser().parse_args(argv)
     progress.set_enabled(False if args.quiet else None)
@@ -347,7 +350,7 @@ def main(argv: list[str] | None = None) -> int:
         mi_displace.init(args.variant)
         handler = getattr(args, "handler", None) or COMMANDS[args.command]
         return handler(args)
-    except (ValueError, FileNotFoundError) as e:
+    except (ValueError, FileNotFoundError, MissingExtraError) as e:
         print(f"mi-displace: error: {' '.join(str(e).split())}", file=sys.stderr)
         raise SystemExit(2) from None
     except LLVMVersionError as e:

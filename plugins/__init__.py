@@ -1,7 +1,9 @@
 """Mitsuba plugin adapters (installed as ``mi_displace.plugins``).
 
-Each module defines one plugin class against the *current* variant and a
-``register()`` function; :func:`register_all` (re)imports them after a variant change.
+Each module declares one plugin (its ``SPEC`` where converted to the typed property reader
+of :mod:`mi_displace.core.properties`) and a ``register()`` function; :func:`register_all`
+(re)imports them after a variant change, after the library modules of
+:data:`VARIANT_MODULES`, whose classes derive from the variant's Mitsuba types.
 """
 import importlib
 import sys
@@ -28,13 +30,29 @@ PLUGIN_MODULES = [
     "mi_displace.plugins.volume_proxy",
 ]
 
+#: Library modules defining subclasses of variant-specific Mitsuba classes (``mi.BSDF``),
+#: reloaded (in this order) before the plugins when the variant changes.
+VARIANT_MODULES = [
+    "mi_displace.vdm.mesostructure",
+    "mi_displace.vdm.bsdfs",
+]
+
 _registered_for: str | None = None
+
+
+def registered_variant() -> str | None:
+    """The variant the plugins were last registered for (``None``: not yet)."""
+    return _registered_for
 
 
 def register_all() -> None:
     """Import (or re-import for a new variant) every plugin module and register it."""
     global _registered_for
     variant = mi.variant()
+    if _registered_for not in (None, variant):
+        for name in VARIANT_MODULES:
+            if name in sys.modules:
+                importlib.reload(sys.modules[name])
     for name in PLUGIN_MODULES:
         module = sys.modules.get(name)
         if module is None:

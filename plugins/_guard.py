@@ -18,8 +18,6 @@ terminal only.  Everything else passes through unchanged (a plugin's own ``Value
 """
 from __future__ import annotations
 
-import functools
-import gc
 import linecache
 import math
 import re
@@ -28,6 +26,7 @@ from typing import Callable
 import mitsuba as mi
 
 from mi_displace.core.progress import stage
+from mi_displace.core.properties import PluginSpec
 
 _STRING_CONVERSION = re.compile(
     r"^(?:could not convert string to float|invalid literal for int\(\) with base \d+): '(.*)'$", re.S)
@@ -115,58 +114,37 @@ def _summary(stats) -> str:
                      if isinstance(stats.get(k), int))
 
 
-def constructor(plugin: str, cls: type) -> Callable[[mi.Properties], object]:
-    """A factory for ``mi.register_*`` that builds ``cls(props)`` with clear input errors.
+def constructor(plugin: str | PluginSpec, cls: type) -> Callable[[mi.Properties], object]:
+    """A factory for ``mi.register_*`` that builds the plugin with clear input errors.
 
     Args:
-        plugin: the XML plugin name (first word of every message).
-        cls: the plugin class, called as ``cls(props)``.
+        plugin: the plugin's :class:`~mi_displace.core.properties.PluginSpec` (its
+            parameters are read and checked before ``cls(props, values)`` runs), or, for a
+            plugin not yet declared, its XML name (``cls(props)`` reads its own properties).
+        cls: the plugin class.
     """
-
+    spec = plugin if isinstance(plugin, PluginSpec) else None
+    plugin = spec.plugin if spec is not None else plugin
     # shapes and BSDFs build geometry or tables a user may wait for: report them
     reported = issubclass(cls, (mi.Shape, mi.BSDF))
 
     def make(props: mi.Properties):
         check_finite_floats(plugin, props)
         name = f"{plugin} {props.id()!r}" if props.id() else plugin
+        args = (props,) if spec is None else (props, spec.read(props))
         try:
             with stage(f"{name}: building", enabled=None if reported else False) as s:
-                made = cls(props)
+                made = cls(*args)
                 s.note = _summary(getattr(made, "build_stats", None))
             return made
         except (ValueError, TypeError) as error:
-            found = _offending_property(props, error)
+            found = None if spec is not None else _offending_property(props, error)
             if found is None:
                 raise
             names, expected = found
             raise ValueError(f"{plugin}: parameter {names} must be {expected}") from None
 
     return make
-
-
-def collector_paused(method):
-    """``method`` run with Python's cyclic garbage collector paused.
-
-    Dr.Jit traces a vectorised call over *every* live instance of its domain (all BSDFs,
-    all textures), holding plain pointers to them.  A Python plugin method called in that
-    trace allocates, which may start the collector, which may free an instance of a dropped
-    scene still waiting in a reference cycle before its turn to be traced: a segfault (seen
-    with tests/vdm/test_vdm_plugin.py then tests/vdm/test_vdm_scene_sequence.py run without
-    a collection between tests).  The plugin methods such a trace calls, and the raster
-    integrator's whole frame (its vectorised calls are launched from Python), run with it
-    paused.  Allocations in Dr.Jit's own code between two instances remain uncovered.
-    """
-    @functools.wraps(method)
-    def paused(*args, **kwargs):
-        if not gc.isenabled():
-            return method(*args, **kwargs)
-        gc.disable()
-        try:
-            return method(*args, **kwargs)
-        finally:
-            gc.enable()
-
-    return paused
 
 
 def take_sensors(props: mi.Properties) -> list:

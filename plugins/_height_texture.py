@@ -5,9 +5,10 @@ variant, so :func:`height_texture_base` builds the base class for the *current* 
 (cached per variant); each plugin module subclasses it at import time and is re-imported by
 :func:`mi_displace.plugins.register_all` after a variant change.
 
-A subclass sets ``PATTERN`` (a key of :data:`mi_displace.core.heightfield.PATTERNS`); its
-properties are then the pattern's parameters with the pattern's defaults. It may override
-:meth:`read_properties` and :meth:`pattern_params` to map other properties onto them.
+A subclass sets ``PATTERN`` (a key of :data:`mi_displace.core.heightfield.PATTERNS`) and is
+built from the values its plugin's spec read (:data:`TO_UV` plus the pattern's parameters,
+declared in the plugin module); it may override :meth:`flat_values` and
+:meth:`pattern_params` to map other properties onto the pattern's.
 Every property is a number, exposed by ``traverse`` as an ``mi.Float`` and re-validated
 in ``parameters_changed``: ``Differentiable`` for the continuous ones (an AD gradient
 enabled on one enters the pattern's kernels as that array, so it reaches the height, its
@@ -24,7 +25,12 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.core import heightfield as hf
-from mi_displace.plugins._guard import collector_paused
+from mi_displace.core.collector import collector_paused
+from mi_displace.core.properties import Param
+
+#: The parameter every height texture has besides its pattern's.
+TO_UV = Param("to_uv", "transform", None, "uv placement (as `bitmap`'s): the upper-left 2×2 "
+              "and the translation of a 4×4 or 3×3 transform")
 
 _BASES: dict[str, type] = {}
 
@@ -54,20 +60,20 @@ def _make_base() -> type:
 
         PATTERN = ""
 
-        def __init__(self, props: mi.Properties):
+        def __init__(self, props: mi.Properties, values: dict):
             super().__init__(props)
             # Python floats (exact, for the kernels) and their mi.Float mirrors (for traverse)
             self._flat = {name: hf.check_real(self.PATTERN, name, value)
-                          for name, value in self.read_properties(props).items()}
+                          for name, value in self.flat_values(values).items()}
             self._values = {name: mi.Float(value) for name, value in self._flat.items()}
-            self._to_uv = _transform3(props.get("to_uv", mi.ScalarTransform4f()), self.PATTERN)
+            to_uv = values["to_uv"]
+            self._to_uv = _transform3(mi.ScalarTransform4f() if to_uv is None else to_uv, self.PATTERN)
             self.parameters_changed([])
 
         # -- parameters ------------------------------------------------------------------
-        def read_properties(self, props: mi.Properties) -> dict:
-            """The flat parameter values from ``props`` (the pattern's defaults where absent)."""
-            return {name: props.get(name, default)
-                    for name, default in hf.pattern_defaults(self.PATTERN).items()}
+        def flat_values(self, values: dict) -> dict:
+            """The flat (traversed) parameter values from the spec's ``values``."""
+            return {name: values[name] for name in hf.pattern_defaults(self.PATTERN)}
 
         def pattern_params(self, flat: dict[str, float]) -> dict:
             """Keyword arguments of the core pattern from the flat property values."""

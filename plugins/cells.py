@@ -1,13 +1,33 @@
-"""``cells`` texture: round C1 bumps ``(1 - r^2/radius^2)^2`` on a hashed, jittered grid.
-
-Properties: ``cells`` (integer count per unit uv, default 8), ``radius`` (cell units,
-``(0, 1]``, default 0.5), ``jitter`` (``[0, 1]``, default 1), ``seed`` (integer >= 0,
-default 0), ``to_uv``. See :func:`mi_displace.core.heightfield.cells`.
-"""
+"""``cells`` texture: round C1 bumps on a hashed, jittered grid (the adapter of
+:func:`mi_displace.core.heightfield.cells`)."""
 import mitsuba as mi
 
-from mi_displace.plugins._height_texture import height_texture_base
+from mi_displace.core.heightfield import MAX_CELLS
+from mi_displace.core.properties import Param, PluginSpec
+from mi_displace.plugins._height_texture import TO_UV, height_texture_base
 from mi_displace.plugins._guard import constructor
+
+SPEC = PluginSpec(
+    "cells", "texture",
+    "Procedural height in [0, 1]: round C1 bumps (1 - r²/radius²)² on a `cells` × `cells` grid "
+    "per unit uv, each jittered by a hash of its cell and `seed`.  Exact uv gradient.",
+    (
+        Param("cells", "int", 8, "cells per unit u and v", low=1, high=MAX_CELLS, editable=True),
+        Param("radius", "float", 0.5, "bump radius", unit="cells", low=0, high=1, open_low=True,
+              editable=True, differentiable=True),
+        Param("jitter", "float", 1.0, "bump centre jitter", unit="cells", low=0, high=1,
+              editable=True, differentiable=True),
+        Param("seed", "int", 0, "jitter hash seed", low=0, high=2**31 - 1, editable=True),
+        TO_UV,
+    ),
+    example="""<shape type="rectangle">
+    <bsdf type="bumpmap">
+        <texture type="cells" name="arbitrary"/>
+        <bsdf type="diffuse"/>
+    </bsdf>
+</shape>""",
+    limits="Periodic over the unit square, so it tiles across closed surfaces' seams.",
+)
 
 
 class Cells(height_texture_base()):
@@ -15,4 +35,4 @@ class Cells(height_texture_base()):
 
 
 def register():
-    mi.register_texture("cells", constructor("cells", Cells))
+    mi.register_texture("cells", constructor(SPEC, Cells))

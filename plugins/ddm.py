@@ -35,7 +35,7 @@ import numpy as np
 
 from mi_displace.ddm.animation import Animation
 from mi_displace.ddm.model import BASE_PARAMS, DDMConfig, DDMModel
-from mi_displace.plugins._guard import constructor
+from mi_displace.plugins._guard import constructor, take_sensors
 
 FLOAT_KEYS = ("gap_u", "gap_v", "w_offset", "u0", "v0", "height", "epsilon", "time", "tolerance",
               "dicing_rate")
@@ -81,11 +81,12 @@ class DDM(mi.Mesh):
     """Tiles mapped over a base; a mi.Mesh whose vertices a Dr.Jit kernel writes."""
 
     def __init__(self, props: mi.Properties):
-        self.model = DDMModel(config_from_props(props))
-        m = self.model
-        super().__init__(props.id() or "ddm", m.vertex_count, m.face_count, props, True, True)
+        self.sensors = take_sensors(props)   # referenced for map_resolution="auto"
         self.to_world = mi.ScalarTransform4f(mi.ScalarMatrix4f(np.array(
             props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float32)))
+        self.model = DDMModel(config_from_props(props), sensors=self.sensors, to_world=self.to_world)
+        m = self.model
+        super().__init__(props.id() or "ddm", m.vertex_count, m.face_count, props, True, True)
         self.time = mi.Float(m.cfg.time)
         self.height = mi.Float(m.cfg.height)
         self._faces_version = None
@@ -123,18 +124,16 @@ class DDM(mi.Mesh):
                             "bytes": self.model.memory_report()["mesh_bytes"]}
         self.build_stats["clamped_vertices"] = self.model.clamped_count(uv)
 
-    def fit_to_scene(self, scene) -> bool:
-        """``map_resolution="auto"``: re-derive R from this shape's screen footprint in the
-        scene's sensors (:meth:`DDMModel.fit_to_sensors`) and re-map through the scene's
-        parameters, so that its acceleration structure follows.  Called by
-        :func:`mi_displace.render.scene.load`; returns True when the maps changed."""
-        if not self.model.fit_to_sensors(scene.sensors(), self.to_world):
+    def fit_to_sensors(self, sensors) -> bool:
+        """``map_resolution="auto"``: re-derive R from this shape's screen footprint in
+        ``sensors`` (the scene's, unless the shape references its own;
+        :meth:`DDMModel.fit_to_sensors`) and re-map.  Called by
+        :func:`mi_displace.fit_to_sensors`, which then rebuilds the scene's acceleration
+        structure; returns True when the maps changed."""
+        if not self.model.fit_to_sensors(self.sensors or list(sensors), self.to_world):
             self.build_stats.update(self.model.stats())
             return False
-        params = mi.traverse(scene)
-        key = next(k for k in params.keys() if k.endswith(".height") and params.properties[k][2] is self)
-        params.set_dirty(key)
-        params.update()
+        self._remap()
         return True
 
     def traverse(self, cb):

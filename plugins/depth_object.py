@@ -10,7 +10,7 @@ objects (§4) and visual hulls (§5).
         <integer name="slices" value="150"/>              <!-- planes across the cube -->
     </shape>
 
-The shape is the cube (12 triangles) the rays enter; its BSDF slices the cube front to back
+The shape is the cube (12 triangles, placed by ``to_world``: any affine transform) the rays enter; its BSDF slices the cube front to back
 in the best orthogonal direction and draws the first point inside all six displacement
 volumes (:mod:`mi_displace.slicing.depth_object`), shaded diffusely with the view-dependent
 colour of the three best-facing images and their normals; elsewhere a Null pass-through.
@@ -26,7 +26,7 @@ import numpy as np
 
 from mi_displace.core.mesh_io import resolve_path
 from mi_displace.plugins.slicing import SlicingBSDF, _slice_count
-from mi_displace.plugins.vdm import nested_objects
+from mi_displace.vdm.mesostructure import nested_objects
 from mi_displace.slicing import depth_object as dobj
 from mi_displace.vdm.frame import shading_interaction
 from mi_displace.plugins._guard import constructor
@@ -114,7 +114,8 @@ class DepthObjectShape(mi.Mesh):
         else:
             raise ValueError(f"{name}: give 'filename' (a cube.json of six images) or a nested "
                              "source shape to capture")
-        obj = dobj.DepthObject(images, slices, hull=self.HULL)
+        to_world = np.array(props.get("to_world", mi.ScalarTransform4f()).matrix, np.float64)
+        obj = dobj.DepthObject(images, slices, hull=self.HULL, to_world=to_world)
         bsdfs = nested_objects(props, mi.BSDF)
         if bsdfs:
             raise ValueError(f"{name}: takes no nested BSDF (colour comes from the images)")
@@ -123,6 +124,7 @@ class DepthObjectShape(mi.Mesh):
         inner["material"] = mi.load_dict({"type": "diffuse", "reflectance": ViewColour(obj)})
         props["bsdf"] = DepthObjectBSDF(inner, obj)
         pos, faces = _cube(images.center, images.half)
+        pos = pos @ to_world[:3, :3].T + to_world[:3, 3]
         super().__init__(props.id() or name, 8, 12, props, False, False)
         params = mi.traverse(self)
         params["vertex_positions"] = mi.Float(pos.astype(np.float32).ravel())

@@ -14,7 +14,11 @@
 
 Mesh bases: ``base="mesh"`` with ``filename`` (PLY/OBJ with UVs) and ``subdivision`` (edge
 splits per triangle) or ``edge_length``.  Meshes without UVs are refused (unwrap them
-first, e.g. with ``mi_displace.bake.unwrap.unwrap`` (xatlas)).  ``scale``, ``midlevel`` and the height texture's parameters are editable through
+first, e.g. with ``mi_displace.bake.unwrap.unwrap`` (xatlas)).  Every copy of a position (UV seams, hard edges) moves by one vector:
+along the angle-weighted normal of the welded surface, by the mean of the copies' heights,
+so closed meshes stay closed; ``split_normals="true"`` instead moves each copy along its own
+vertex normal (cracks open where they differ; warns at load).
+``scale``, ``midlevel`` and the height texture's parameters are editable through
 ``mi.traverse`` (re-displacement keeps the topology) and differentiable (issue 14: the
 vertices and shading normals are recomputed with the AD graph attached; integer texture
 parameters and the dicing rates refuse a gradient, naming it).
@@ -25,9 +29,9 @@ Screen-adaptive dicing (:mod:`mi_displace.core.dicing`, Cycles' meaning): ``dici
 ``offscreen_dicing_scale`` (default 4, coarser outside the view frustum and behind the
 camera).  The sensors are those referenced in the shape (``<ref id="camera"/>``, any number:
 the finest need wins); without one the shape dices coarsely and warns until
-:func:`mi_displace.core.dicing.redice` gives it the scene's sensors (the mi-displace loaders
+:func:`mi_displace.fit_to_sensors` gives it the scene's sensors (the mi-displace loaders
 do).  ``dicing_rate`` and ``offscreen_dicing_scale`` are editable through ``mi.traverse``;
-every edit (and ``redice`` after a camera edit) recomputes the edge rates and rebuilds
+every edit (and ``fit_to_sensors`` after a camera edit) recomputes the edge rates and rebuilds
 only what changed: the topology is kept when no edge rate moved.
 
 ``build_stats`` (a dict attribute, printed by ``mi-displace render --explain``): mode, rate,
@@ -46,9 +50,9 @@ import numpy as np
 
 from mi_displace.core import dicing, surfaces, tessellate, thickness
 from mi_displace.core.mesh_io import load_uv_mesh
-from mi_displace.core.texture_height import check_texture_finite, height_function
+from mi_displace.core.texture_height import check_texture_finite, height_function, warn_if_srgb
 from mi_displace.core.thickness import crossing_check, crossing_warning
-from mi_displace.plugins._guard import constructor, take_sensors
+from mi_displace.plugins._guard import boolean, constructor, take_sensors
 
 BASE_PARAMS = {
     "plane": (),
@@ -124,6 +128,7 @@ class Displaced(mi.Mesh):
             props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float32)))
         if height is not None:
             check_texture_finite(height)
+            warn_if_srgb(height, "displaced")
 
         if base_name == "mesh":
             if "filename" not in props:
@@ -135,12 +140,17 @@ class Displaced(mi.Mesh):
             # interpolated frame, the uniform refinement's topology
             self._weld = tessellate.weld_classes(mesh_data[0])
             self._frames = tessellate.vertex_frames(*mesh_data)
+            self._directions = _mesh_directions(mesh_data, self._weld, props,
+                                                props.id() or "(no id)")
             if not self.dicing:
                 self._topology = tessellate.subdivision_topology(mesh_data[3], self._weld, grid)
         else:
             base = surfaces.make_base(
                 base_name, **{k: float(props.get(k)) for k in BASE_PARAMS.get(base_name, ())
                               if k in props})
+            if "split_normals" in props:
+                raise ValueError(f"displaced: 'split_normals' applies to base 'mesh' only "
+                                 f"(base is {base_name!r})")
             mesh_data = None
             grid = None if self.dicing else tessellate.grid_resolution(base, resolution, edge_length)
         self.base, self.mesh_data, self.grid = base, mesh_data, grid
@@ -179,7 +189,8 @@ class Displaced(mi.Mesh):
                 self.height_texture, 1e-3 / self.grid)
             t = tessellate.displace_mesh_vertices(*self.mesh_data, *self._topology, height,
                                                   self.scale, self.midlevel,
-                                                  frames=self._frames)
+                                                  frames=self._frames,
+                                                  directions=self._directions)
         return t, {"mode": "uniform"}
 
     def _dice(self, name: str):
@@ -198,7 +209,7 @@ class Displaced(mi.Mesh):
         if not views:
             warn.append(f"{owner}: dicing_rate needs a sensor and none is referenced "
                         "(<ref id=\"...\"/> in the shape); diced coarsely until "
-                        "mi_displace.core.dicing.redice(scene) gives it the scene's sensors")
+                        "mi_displace.fit_to_sensors(scene) gives it the scene's sensors")
             views = None
         c = self._cache
         if self.base is not None:
@@ -247,7 +258,7 @@ class Displaced(mi.Mesh):
             pos, nrm, uvs, faces = self.mesh_data
             t = tessellate.displace_mesh_vertices(pos, nrm, uvs, faces, topo.src, topo.bary,
                                                   topo.groups, topo.faces, height, scale, midlevel,
-                                                  frames=self._frames)
+                                                  frames=self._frames, directions=self._directions)
             segs, patches = edges["seg"], len(faces)
         rebuilt.append("vertices")
         times["displace_s"] = time.perf_counter() - clock
@@ -309,9 +320,9 @@ class Displaced(mi.Mesh):
         height = height_function(self.height_texture, 1e-3)
         return lambda uv: self.scale * (height(uv)[0] - self.midlevel)
 
-    def redice_for(self, sensors) -> bool:
+    def fit_to_sensors(self, sensors) -> bool:
         """Dice for ``sensors`` (the scene's) unless the shape references its own; True if
-        anything was rebuilt.  Called by :func:`mi_displace.core.dicing.redice`."""
+        anything was rebuilt.  Called by :func:`mi_displace.core.dicing.fit_to_sensors`."""
         if not self.dicing:
             return False
         if sensors is not None and not self._own_sensors():
@@ -405,6 +416,22 @@ class Displaced(mi.Mesh):
         s = self.build_stats
         return (f"Displaced[base={self.base.name if self.base else 'mesh'}, "
                 f"vertices={s.get('vertices')}, faces={s.get('faces')}]")
+
+
+def _mesh_directions(mesh_data, weld: np.ndarray, props, name: str) -> np.ndarray:
+    """(V, 3) displacement direction of each base vertex: the welded normal (one per
+    position, watertight), or with ``split_normals`` the vertex's own normal, warning once
+    (here, at load) when copies of a position disagree and the surface will crack."""
+    pos, nrm, _, faces = mesh_data
+    if not boolean("displaced", props, "split_normals", False):
+        return tessellate.welded_normals(pos, nrm, faces, weld)
+    split = tessellate.split_positions(nrm, weld)
+    if split:
+        warnings.warn(f"displaced {name!r}: split_normals=true moves each copy of a position "
+                      f"along its own vertex normal; the copies disagree at {split:,} positions "
+                      "(UV seams, hard edges), where the displaced surface cracks open",
+                      stacklevel=3)
+    return nrm
 
 
 def _height_range(texture) -> tuple[float, float]:

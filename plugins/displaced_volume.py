@@ -54,7 +54,8 @@ from mi_displace.volume import maps as primitives
 from mi_displace.volume.displacement import DisplacementChain, PlacedMap
 from mi_displace.volume.field import AlbedoField, DisplacedVolume
 from mi_displace.volume.objects import load_raw, load_vol, piggy_bank
-from mi_displace.plugins._guard import collector_paused, constructor
+from mi_displace.core.collector import collector_paused
+from mi_displace.plugins._guard import constructor
 
 MAX_MAPS = 32
 OUTPUTS = ("sigma_t", "albedo")
@@ -150,6 +151,10 @@ class DisplacedVolumePlugin(mi.Volume):
     """sigma_t (or the albedo) of the displaced object (see the module docstring)."""
 
     def __init__(self, props: mi.Properties):
+        if "to_world" in props:   # it would be overwritten below by the medium box: refuse it
+            raise ValueError("displaced_volume: parameter 'to_world' is not supported: the object "
+                             "is centred with its longest side 1 world unit (docs/volume.md); place "
+                             "the maps with map<i>_to_world and move the camera, not the object")
         self.output = props.get("output", "sigma_t")
         if self.output not in OUTPUTS:
             raise ValueError(f"displaced_volume: output must be one of {OUTPUTS}, got {self.output!r}")

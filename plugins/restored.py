@@ -17,7 +17,7 @@ The mesh is built by :func:`mi_displace.bake.restore.restore` (Dr.Jit subdivisio
 displacement, alias-welded seams, recomputed normals) and uploaded into this ``mi.Mesh``.
 ``levels="auto"`` derives the levels from the map resolution and the projected size through
 the sensors (:mod:`mi_displace.bake.levels`): the referenced ones, else the scene's, given by
-``redice_for(sensors)`` / ``fit_to_scene(scene)`` (the mi-displace loaders call them);
+``fit_to_sensors(sensors)`` (:func:`mi_displace.fit_to_sensors` calls it; so do the mi-displace loaders);
 until then from the map alone.  ``build_stats`` (a dict) holds levels, why, faces,
 vertices, bytes and seconds.
 
@@ -116,7 +116,7 @@ class Restored(mi.Mesh):
                             "restore_s": out.seconds, "build_s": time.perf_counter() - start,
                             **out.report}
 
-    def redice_for(self, sensors) -> bool:
+    def fit_to_sensors(self, sensors) -> bool:
         """``levels="auto"``: re-derive the levels for ``sensors`` (the scene's, unless the
         shape references its own) and rebuild if they changed; True if rebuilt."""
         if not self.auto or self.split is not None:
@@ -132,13 +132,6 @@ class Restored(mi.Mesh):
         self._upload(restore(self.low, formats.read_map(self.map_path), levels=levels,
                              keep_holes=self.keep_holes), start)
         return True
-
-    def fit_to_scene(self, scene) -> bool:
-        """The same for a loaded scene: its sensors, then its acceleration structure."""
-        changed = self.redice_for(scene.sensors())
-        if changed:
-            scene.parameters_changed([])
-        return changed
 
     def to_string(self):
         return (f"Restored[levels={self.levels}, vertices={self.build_stats['vertices']}, "

@@ -41,9 +41,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.core.texture_height import check_texture_finite
+from mi_displace.core.texture_height import check_texture_finite, warn_if_srgb
 from mi_displace.plugins.displaced import BASE_PARAMS
-from mi_displace.plugins.vdm import MesostructureBSDF, nested_objects
+from mi_displace.vdm.mesostructure import MesostructureBSDF, nested_objects, read_shared
 from mi_displace.slicing import geometry as geo
 from mi_displace.slicing.sliced import DIRECTIONS, SlicedVolume
 from mi_displace.vdm.frame import shading_interaction
@@ -60,7 +60,7 @@ class SlicingBSDF(MesostructureBSDF):
     HAS_SILHOUETTE = True
 
     def __init__(self, props: mi.Properties, model):
-        super().__init__(props)
+        super().__init__(props, read_shared(props, self.PLUGIN))
         self.model = model   # a SlicedVolume (or a DepthObject in the subclass)
         self.self_shadows = bool(props.get("self_shadows", True))
         self._cache = None
@@ -135,6 +135,7 @@ class Slicing(mi.Mesh):
         if not isinstance(height, mi.Texture):
             raise ValueError("slicing: 'height' must be a nested texture (D in [0, 1])")
         check_texture_finite(height)
+        warn_if_srgb(height, "slicing")
         scale = float(props.get("scale", 0.1))
         if not (math.isfinite(scale) and scale > 0):
             raise ValueError(f"slicing: 'scale' must be a positive number, got {scale}")

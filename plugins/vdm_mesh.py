@@ -90,6 +90,15 @@ class VDMMesh(mi.Mesh):
                 "curvature will be missing; weld the mesh")
             warnings.warn(self.curvature_warning)
             mi.Log(mi.LogLevel.Warn, self.curvature_warning)
+        self.open_warning = None
+        if "filename" in props and (edges := mesh_curvature.open_edge_count(obj_pos, faces)):
+            self.open_warning = (
+                f"vdm_mesh {props.id() or ''!r}: the mesh is open ({edges} boundary edges): "
+                "vdm, horizon and relief shade front faces only, so a surface seen from behind "
+                "(an open vase's inner wall) renders black; close the mesh, or give the inner "
+                "side a shape of its own with a plain BSDF")
+            warnings.warn(self.open_warning)
+            mi.Log(mi.LogLevel.Warn, self.open_warning)
         self.c_max, self.c_min = c_max, c_min
         self.build_stats = {"vertices": len(pos), "faces": len(faces),
                             "curvature_min": float(c_min.min()), "curvature_max": float(c_max.max())}

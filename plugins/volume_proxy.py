@@ -1,24 +1,32 @@
 """``<shape type="volume_proxy">``: the box that holds a ``displaced_volume``'s medium under
-``volpath`` — exactly the box the volume reports to Mitsuba (its proxy box, §4.2, or
-``bounds``), as a 12-triangle mesh with the user's BSDF (``null``) and media.
-
-Measured (Mitsuba 3.9.1): with a container larger than the volume's own box, ``volpath``
-darkens parts of the medium that a brute-force quadrature of the same single-scattering
-integral lights (the same with a native ``gridvolume``); with a container equal to that box
-the two agree.  So the volume scenes use this shape instead of a hand-sized ``cube``.
-
-.. code-block:: xml
-
-    <shape type="volume_proxy">
-        <ref name="volume" id="volume"/>
-        <bsdf type="null"/>
-        <medium type="heterogeneous" name="interior"> <ref name="sigma_t" id="volume"/> ... </medium>
-    </shape>
-"""
+``volpath`` (the adapter of its ``medium_box``)."""
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.core.properties import REQUIRED, Param, PluginSpec
+from mi_displace.volume import EXAMPLE_XML
 from mi_displace.plugins._guard import constructor
+
+SPEC = PluginSpec(
+    "volume_proxy", "shape",
+    "The box that holds a `displaced_volume`'s medium under `volpath`: exactly the box the "
+    "volume reports to Mitsuba (its proxy box, §4.2, or `bounds`), as a 12-triangle mesh with "
+    "the user's BSDF (`null`) and media.  Measured (Mitsuba 3.9.1): with a container larger "
+    "than the volume's own box, `volpath` darkens parts of the medium that a brute-force "
+    "quadrature of the same single-scattering integral lights (the same with a native "
+    "`gridvolume`); with this box the two agree.",
+    (Param("volume", "volume", REQUIRED, "the `displaced_volume` whose medium it holds (a `<ref>`)"),),
+    example=EXAMPLE_XML + """
+<shape type="volume_proxy">
+    <ref name="volume" id="volume"/>
+    <bsdf type="null"/>
+    <medium type="heterogeneous" name="interior">
+        <ref name="sigma_t" id="volume"/>
+        <float name="albedo" value="0.8"/>
+    </medium>
+</shape>""",
+    limits="Render it with `volpath`: `path` ignores media.",
+)
 
 CORNERS = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], dtype=np.float32)
 # two outward-facing triangles per face of the unit cube (corner index = x + 2 y + 4 z)
@@ -27,10 +35,10 @@ FACES = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 
 
 
 class VolumeProxy(mi.Mesh):
-    def __init__(self, props: mi.Properties):
-        volume = props.get("volume", None)
-        if volume is None or not hasattr(volume, "medium_box"):
-            raise ValueError("volume_proxy: needs <ref name=\"volume\" id=...> to a displaced_volume")
+    def __init__(self, props: mi.Properties, values: dict):
+        volume = values["volume"]
+        if not hasattr(volume, "medium_box"):
+            raise ValueError("volume_proxy: parameter 'volume' must be a <ref> to a displaced_volume")
         lo, hi = volume.medium_box()
         super().__init__(props.id() or "volume_proxy", 8, 12, props, False, False)
         params = mi.traverse(self)
@@ -40,4 +48,4 @@ class VolumeProxy(mi.Mesh):
 
 
 def register():
-    mi.register_shape("volume_proxy", constructor("volume_proxy", VolumeProxy))
+    mi.register_shape("volume_proxy", constructor(SPEC, VolumeProxy))

@@ -1,20 +1,6 @@
 """``<integrator type="volume_slicer">``: the paper's slicing volume renderer (§4.2) of
-:mod:`mi_displace.volume.slicing`, GPU-style and deterministic.
-
-.. code-block:: xml
-
-    <integrator type="volume_slicer">
-        <ref name="volume" id="walnut"/>              <!-- a displaced_volume -->
-        <string name="model" value="scatter"/>        <!-- scatter (matches volpath) | surface -->
-        <string name="normals" value="jacobian"/>     <!-- gradient | jacobian | blend | fd (surface) -->
-        <float name="spacing" value="1.0"/>           <!-- slice distance, object voxels -->
-        <float name="albedo" value="0.8"/>            <!-- scatter: the medium's albedo, or -->
-        <!-- <ref name="albedo" id="..."/>               a displaced_volume output="albedo" (also the surface colour) -->
-        <rgb name="color" value="0.8, 0.7, 0.55"/>    <!-- surface: diffuse reflectance -->
-        <float name="iso" value="0.5"/>               <!-- surface: iso value of tau(O) -->
-        <boolean name="shadows" value="true"/>
-        <integer name="aa" value="1"/>
-    </integrator>
+:mod:`mi_displace.volume.slicer`, GPU-style and deterministic.  The adapter: :data:`SPEC`
+reads the parameters, :func:`mi_displace.volume.slicer.render` draws the frame.
 
 A separate integrator rather than a mode of ``raster``: ``raster`` shades the first opaque
 surface a ray meets, while slicing composites every slice through a volume and needs the
@@ -23,39 +9,80 @@ method.  ``mi.render`` returns a (height, width, 3) image; ``spp`` and ``seed`` 
 """
 import mitsuba as mi
 
-from mi_displace.volume import slicing
-from mi_displace.plugins._guard import boolean, constructor
+from mi_displace.core.properties import REQUIRED, Param, PluginSpec
+from mi_displace.render import lights
+from mi_displace.volume import EXAMPLE_XML, slicer
+from mi_displace.volume.field import NORMALS
+from mi_displace.plugins._guard import constructor
+
+SPEC = PluginSpec(
+    "volume_slicer", "integrator",
+    "The volume renderer of the discontinuous displacement paper (§4.2): view-aligned slices "
+    "through the displaced object's proxy box composited front to back, each sample read "
+    "through the inverse displacement maps; single scattering towards the lights (`scatter`, "
+    "the model `volpath` computes) or a shaded iso-surface (`surface`).",
+    (
+        Param("volume", "volume", REQUIRED, "the `displaced_volume` to draw (a `<ref>`)"),
+        Param("model", "string", "scatter", "`scatter` (matches volpath) or `surface`",
+              choices=slicer.MODELS),
+        Param("normals", "string", "jacobian", "surface model: how normals are found", choices=NORMALS),
+        Param("spacing", "float", 1.0, "distance between slices", unit="object voxels", low=0, open_low=True),
+        Param("albedo", "float|volume", 0.8, "scatter: the medium's albedo, or a `displaced_volume` "
+              "with output=\"albedo\" (then also the surface colour)", low=0, high=1),
+        Param("color", "rgb", (0.8, 0.7, 0.55), "surface model: diffuse reflectance"),
+        Param("iso", "float", 0.5, "surface model: iso value of tau(O)", low=0, high=1,
+              open_low=True, open_high=True),
+        Param("sharpness", "float", 4.0, "surface model: extinction ramp of the iso-surface",
+              unit="1/voxel", low=0, open_low=True),
+        Param("shadows", "bool", True, "shadows through a light-transmittance grid"),
+        Param("light_resolution", "int", None, "light grid nodes per side (default: about one per "
+              "object voxel, 24–96)", low=2, high=1024),
+        Param("aa", "int", 1, "rays per pixel side (aa × aa box pattern)", low=1, high=16),
+        Param("reuse_lookup", "bool", True, "shade with the density step's D_k lookup (false: "
+              "read again; the same image, slower)"),
+    ),
+    example=EXAMPLE_XML + """
+<integrator type="volume_slicer">
+    <ref name="volume" id="volume"/>
+    <string name="model" value="surface"/>
+</integrator>""",
+    stats="none (the frame is drawn at render time)",
+    limits="Deterministic single scattering only; `spp` and `seed` are ignored.  Draws delta "
+           "lights and `constant` ambient light; any other emitter (`area`, `envmap`, …) is "
+           "refused, naming it.",
+)
 
 
 class VolumeSlicer(mi.SamplingIntegrator):
     """View-aligned slices through the displaced bounding box, composited front to back."""
 
-    def __init__(self, props: mi.Properties):
+    def __init__(self, props: mi.Properties, values: dict):
         super().__init__(props)
-        volume = props.get("volume", None)
-        if volume is None or not hasattr(volume, "volume"):
-            raise ValueError("volume_slicer: needs <ref name=\"volume\" id=...> to a displaced_volume")
-        self.plugin = volume
-        color = props.get("color", None)
-        albedo = props.get("albedo", 0.8)
-        if not isinstance(albedo, (int, float)):
+        volume, albedo = values["volume"], values["albedo"]
+        if not hasattr(volume, "volume"):
+            raise ValueError("volume_slicer: parameter 'volume' must be a <ref> to a displaced_volume")
+        if not isinstance(albedo, float):
             if getattr(albedo, "albedo", None) is None:
-                raise ValueError("volume_slicer: 'albedo' must be a number or a <ref> to a displaced_volume "
-                                 "with output=\"albedo\"")
+                raise ValueError("volume_slicer: parameter 'albedo' must be a number or a <ref> to a "
+                                 "displaced_volume with output=\"albedo\"")
             albedo = albedo.albedo
-        self.settings = slicing.SliceSettings(
-            model=props.get("model", "scatter"), normals=props.get("normals", "jacobian"),
-            spacing=float(props.get("spacing", 1.0)), albedo=albedo,
-            color=(0.8, 0.7, 0.55) if color is None else tuple(mi.ScalarColor3f(color)),
-            iso=float(props.get("iso", 0.5)), sharpness=float(props.get("sharpness", 4.0)),
-            shadows=boolean("volume_slicer", props, "shadows", True),
-            light_resolution=props.get("light_resolution", None), aa=int(props.get("aa", 1)))
-        slicing.check_slices(volume.volume, self.settings)
+        self.plugin = volume
+        self.settings = slicer.SliceSettings(
+            model=values["model"], normals=values["normals"], spacing=values["spacing"],
+            albedo=albedo, color=values["color"], iso=values["iso"], sharpness=values["sharpness"],
+            shadows=values["shadows"], light_resolution=values["light_resolution"],
+            aa=values["aa"], reuse_lookup=values["reuse_lookup"])
+        slicer.check_slices(volume.volume, self.settings)
 
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
-        return slicing.render(scene, sensor, self.plugin.volume, self.settings)
+        return slicer.render(scene, sensor, self.plugin.volume, self.settings)
+
+    def setup_problem(self, scene) -> str | None:
+        """An emitter the slicer does not model (one line), or ``None``; scene loaders
+        call it after loading."""
+        return lights.emitter_problem(scene, "volume_slicer")
 
     def to_string(self):
         s = self.settings
@@ -63,4 +90,4 @@ class VolumeSlicer(mi.SamplingIntegrator):
 
 
 def register():
-    mi.register_integrator("volume_slicer", constructor("volume_slicer", VolumeSlicer))
+    mi.register_integrator("volume_slicer", constructor(SPEC, VolumeSlicer))

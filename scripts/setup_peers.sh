@@ -7,16 +7,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-as_root() {
-  if [ "$(id -u)" = 0 ]; then "$@"
-  elif command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null; then sudo "$@"
-  else return 1; fi
-}
-
 SYSTEM_PACKAGES="libegl1 libgl1-mesa-dri libegl-mesa0"
+SUDO=$([ "$(id -u)" = 0 ] || echo "sudo -n")   # root, or sudo without a password prompt
 if ! ldconfig -p 2>/dev/null | grep -q 'libEGL_mesa\.so'; then
   echo "[setup_peers] Mesa's EGL not found: installing $SYSTEM_PACKAGES (apt-get)"
-  if ! { as_root apt-get update -qq && as_root apt-get install -y -qq $SYSTEM_PACKAGES; }; then
+  if ! { $SUDO apt-get update -qq && $SUDO apt-get install -y -qq $SYSTEM_PACKAGES; }; then
     echo "[setup_peers] ERROR: install them: sudo apt-get install -y $SYSTEM_PACKAGES" >&2
     exit 1
   fi

@@ -26,7 +26,7 @@ backend.init()
 import drjit as dr, mitsuba as mi
 import before_displacement as bd, before_field as bf, before_slicing as bs
 from mi_displace.bench import volume as B
-from mi_displace.volume import displacement as ad, field as af, slicing as as_
+from mi_displace.volume import displacement as ad, field as af, slicer as as_
 
 obj, sensor, scene = B.walnut_256(), B._sensor(), B.sun_scene()
 kw = B.VOLUME_KW

@@ -12,7 +12,7 @@ from mi_displace.core import backend
 backend.init()
 import drjit as dr, mitsuba as mi
 from mi_displace.bench import volume as B
-from mi_displace.volume import displacement as ad, field as af, slicing as s
+from mi_displace.volume import displacement as ad, field as af, slicer as s
 obj, sensor, scene = B.walnut_256(), B._sensor(), B.sun_scene()
 M, kw = B.PULL_TO_WORLD, B.VOLUME_KW
 st = s.SliceSettings(model="surface", normals="jacobian", spacing=1.0, shadows=False, iso=B.ISO)

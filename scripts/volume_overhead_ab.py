@@ -9,7 +9,7 @@ CPU), and whether each image equals the first case's.
 
     [REPS=60] ./.venv/bin/python scripts/volume_overhead_ab.py
 
-Switches: ``reuse`` = slicing.REUSE_LOOKUP (shade with the density step's lookup),
+Switches: ``reuse`` = SliceSettings.reuse_lookup (shade with the density step's lookup),
 ``box`` = the D_k's read_box (skip reads outside its non-zero nodes)."""
 import json, os, statistics, time
 import numpy as np
@@ -17,7 +17,7 @@ from mi_displace.core import backend
 backend.init()
 import drjit as dr
 from mi_displace.bench import volume as B
-from mi_displace.volume import displacement as ad, field as af, slicing as s
+from mi_displace.volume import displacement as ad, field as af, slicer as s
 
 obj, sensor, scene = B.walnut_256(), B._sensor(), B.sun_scene()
 st = s.SliceSettings(model="surface", normals="jacobian", spacing=1.0, shadows=False, iso=B.ISO)
@@ -43,7 +43,7 @@ imgs = {}
 load = os.getloadavg()
 for _ in range(int(os.environ.get("REPS", 60)) + 1):
     for k, (v, reuse, box) in cases.items():
-        s.REUSE_LOOKUP = reuse
+        st.reuse_lookup = reuse
         if v in boxes:
             v.chain.sampled_maps()[0].read_box = boxes[v] if box else None
         dr.sync_thread()

@@ -122,10 +122,13 @@ def _cmd_meshdiff(args) -> int:
     from mi_displace.bake.meshdata import load_mesh
     from mi_displace.evaluate.metrics import mesh_distance
 
-    a, b = load_mesh(args.a, "mesh A"), load_mesh(args.b, "mesh B")
     if args.samples < 1:
         raise ValueError(f"--samples: must be positive, got {args.samples}")
-    d = mesh_distance((a.positions, a.faces), (b.positions, b.faces), samples=args.samples)
+    with stage(f"meshdiff: loading {args.a} and {args.b}") as s:
+        a, b = load_mesh(args.a, "mesh A"), load_mesh(args.b, "mesh B")
+        s.note = f"{len(a.faces):,} and {len(b.faces):,} faces"
+    with stage(f"meshdiff: {args.samples:,} surface samples each way"):
+        d = mesh_distance((a.positions, a.faces), (b.positions, b.faces), samples=args.samples)
     if args.json:
         print(json.dumps({"a": args.a, "b": args.b, **d}, indent=2))
     else:

@@ -56,12 +56,12 @@ import drjit as dr
 import numpy as np
 
 from mi_displace.bench._timing import output_dir
+from mi_displace.core.resources import data_path
 
-REPO = Path(__file__).resolve().parents[2]
-HIGH = REPO / "data" / "bunny" / "stanford-bunny.obj"
+HIGH = data_path("bunny", "stanford-bunny.obj")
 LOW_FACES = 4857
-SPOT = REPO / "data" / "spot" / "spot_triangulated.obj"
-SPOT_CAGE = REPO / "data" / "spot" / "spot_control_mesh.obj"
+SPOT = data_path("spot", "spot_triangulated.obj")
+SPOT_CAGE = data_path("spot", "spot_control_mesh.obj")
 
 
 class Sizes(NamedTuple):

@@ -35,10 +35,10 @@ from pathlib import Path
 import numpy as np
 
 from mi_displace.bench._timing import output_dir
+from mi_displace.core.resources import data_path
 
-REPO = Path(__file__).resolve().parents[2]
-SPOT = REPO / "data" / "spot" / "spot_triangulated.obj"
-BUNNY = REPO / "data" / "bunny" / "stanford-bunny.obj"
+SPOT = data_path("spot", "spot_triangulated.obj")
+BUNNY = data_path("bunny", "stanford-bunny.obj")
 
 
 def spot_displaced(iterations: int = 2):

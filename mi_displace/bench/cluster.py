@@ -1,6 +1,6 @@
 """``mi-displace bench cluster``: one 24-point sweep run locally and on a local Dask cluster.
 
-The sweep (:data:`FULL`) is ``tests/data/tradeoff/bumpy_sphere.xml`` at 64x64:
+The sweep (:data:`FULL`) is the packaged ``scenes/tradeoff/bumpy_sphere.xml`` at 64x64:
 ``resolution`` (8 values) x ``ball.scale`` (3 values), each point its own job (cold + 3
 warm rounds).  It runs once in this process and once on ``local:2`` (two single-threaded
 worker processes on this machine), each with an empty point cache, and reports both wall
@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import statistics
 import time
-from pathlib import Path
 from typing import NamedTuple
 
 from mi_displace.bench._timing import print_record
+from mi_displace.core.resources import scene_path
 
-SCENE = Path(__file__).resolve().parents[2] / "tests" / "data" / "tradeoff" / "bumpy_sphere.xml"
+SCENE = scene_path("tradeoff", "bumpy_sphere.xml")
 WORKERS = 2
 
 
@@ -52,8 +52,9 @@ def run(sizes: Sizes = FULL) -> dict:
 
     from mi_displace.evaluate import compare as cmp
     from mi_displace.evaluate import tradeoff as tr
-    from mi_displace.evaluate.jobs import run_jobs
+    from mi_displace.evaluate.jobs import check_cluster, run_jobs
 
+    check_cluster(f"local:{WORKERS}")   # the [cluster] extra, before the local half runs
     knobs = [tr.parse_knob(k) for k in sizes.knobs]
     settings = cmp.protocol_settings(SCENE, {"res": str(sizes.res)})
     jobs = [tr._point_job(SCENE, settings, point, knobs, sizes.warm_rounds)

@@ -27,14 +27,13 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.bench._timing import median_time, print_record
-
+from mi_displace.core.resources import data_path
 from mi_displace.ddm import accuracy
 from mi_displace.ddm.animation import Animation
 from mi_displace.ddm.model import DDMConfig, DDMModel
 
-ROOT = Path(__file__).resolve().parents[2]
-SPOT = str(ROOT / "data" / "spot" / "spot_triangulated.obj")
-BUNNY = str(ROOT / "data" / "bunny" / "bun_zipper_res3.ply")
+SPOT = str(data_path("spot", "spot_triangulated.obj"))
+BUNNY = str(data_path("bunny", "bun_zipper_res3.ply"))
 
 
 class Sizes(NamedTuple):

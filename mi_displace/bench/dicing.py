@@ -39,11 +39,11 @@ import drjit as dr
 import mitsuba as mi
 
 from mi_displace.bench._timing import output_dir, print_record
+from mi_displace.core.resources import scene_path
 from mi_displace.evaluate import metrics
 from mi_displace.render import scene as scenes
 
 CYCLES_FACES = 821_760       # Cycles' count for its 5,120-triangle sphere (issue 13, quoted)
-ROOT = Path(__file__).resolve().parents[2]
 SWEEPS = {  # scene -> extra -D parameters
     "displaced_sphere": {}, "bump_vs_displaced": {"mode": "reference"},
     "displaced_horizon": {"mode": "uniform"},
@@ -168,7 +168,7 @@ def cycles_sphere(sizes: Sizes) -> dict:
 
 def sweep(name: str, sizes: Sizes) -> dict:
     """Part 2 for one scene."""
-    path = ROOT / "scenes" / f"{name}.xml"
+    path = scene_path(f"{name}.xml")
     extra = {**SWEEPS[name], "res": sizes.res}
     dicing_params = ({"mode": "approximation", "res": sizes.res} if name == "displaced_horizon"
                      else {**extra, "tessellation": "dicing"})

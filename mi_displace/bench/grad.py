@@ -56,8 +56,6 @@ from mi_displace.core import tessellate
 from mi_displace.core.texture_height import height_function
 from mi_displace.inverse import figures, gradcheck, recover
 
-ROOT = Path(__file__).resolve().parents[2]
-
 
 class Sizes(NamedTuple):
     """What a run renders: the plane's ``map_size``² height map tessellated at
@@ -65,8 +63,8 @@ class Sizes(NamedTuple):
     at ``image``² pixels; ``edits`` timed edits per path of the mesh re-displacement;
     ``seeds`` AD and FD seeds per plane check, ``check_seeds`` per procedural / shadow check,
     checks at ``check_image``² pixels, every ``procedural_step``-th parameter of
-    :data:`~mi_displace.inverse.gradcheck.PROCEDURAL` (2: one per texture); ``iterations`` recovery steps on a ``map_size``² map
-    seen at ``recovery_image``² pixels."""
+    :data:`~mi_displace.inverse.gradcheck.PROCEDURAL` (2: one per texture); ``iterations``
+    recovery steps on a ``map_size``² map seen at ``recovery_image``² pixels."""
     map_size: int
     plane_resolution: int
     image: int
@@ -203,12 +201,13 @@ def million_sphere(sizes: Sizes = FULL) -> dict:
 
 def redo_per_load_work(shape) -> None:
     """Recompute what a uniform ``displaced`` shape on a mesh base computes once per load
-    (refinement topology, vertex frames) and drop its thin-shell rays: the next edit does
+    (refinement topology, vertex frames, welded directions) and drop its thin-shell rays: the next edit does
     all the work every edit did before they were kept (the baseline of the benches)."""
     pos, _, _, faces = shape.mesh_data
     shape._topology = tessellate.subdivision_topology(faces, tessellate.weld_classes(pos),
                                                       shape.grid)
     shape._frames = tessellate.vertex_frames(*shape.mesh_data)
+    shape._directions = tessellate.welded_normals(pos, shape.mesh_data[1], faces)
     shape._rays = None
 
 

@@ -26,7 +26,8 @@ All in one process, 512 x 512, one directional light + ambient, warm medians:
 ``python -m mi_displace.bench.raster --figures DIR`` also measures the z-buffer / ray
 tracing consistency on the repository's scenes and the shadow-map trade (resolution,
 bias, normal offset against shadow rays: FLIP, shadow-mask error, time), writing JSON and
-a PNG plot.
+a PNG plot.  ``--area-sweep FILE`` measures the ``area_samples`` trade on Mitsuba's
+Cornell box (area light on a rectangle) against a path-traced reference (max_depth 2).
 """
 from __future__ import annotations
 
@@ -41,10 +42,10 @@ import numpy as np
 
 from mi_displace.bench._timing import median_time
 from mi_displace.bench.peers import measure
+from mi_displace.core.resources import data_path, scene_path
 from mi_displace.render import raster
 
-ROOT = Path(__file__).resolve().parents[2]
-SPOT = str(ROOT / "data" / "spot" / "spot_triangulated.obj")
+SPOT = str(data_path("spot", "spot_triangulated.obj"))
 RES = 512
 
 
@@ -323,7 +324,7 @@ def _load(name: str, res: int) -> mi.Scene:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return mi.load_file(str(ROOT / "scenes" / f"{name}.xml"), mode="approximation",
+        return mi.load_file(str(scene_path(f"{name}.xml")), mode="approximation",
                             integrator="raster", res=res)
 
 
@@ -362,9 +363,10 @@ def consistency(res: int = 256) -> list[dict]:
         rt_img, rt_s = _render(sc, raster.Options())
         zb_img, zb_s = _render(sc, raster.Options(visibility="zbuffer"))
         ray, _, _, _ = raster.pixel_rays(sensor, aa)
-        si_rt, _ = raster.first_opaque_hit(sc, ray, sc.integrator().max_layers, mi.Bool(True))
+        layers = sc.integrator().max_layers or raster.layer_limit(sc.shapes(), sc)
+        si_rt, _, _ = raster.first_opaque_hit(sc, ray, layers, mi.Bool(True))
         geom = zbuffer.gather_geometry(sc.shapes())
-        si_zb = raster.zbuffer_hit(sensor, geom, ray, aa)
+        si_zb, _ = raster.zbuffer_hit(sensor, geom, ray, aa, layers)
         same = (si_rt.is_valid() == si_zb.is_valid()) & (
             ~si_rt.is_valid() | ((si_rt.prim_index == si_zb.prim_index)
                                  & (si_rt.shape == si_zb.shape)))
@@ -493,6 +495,55 @@ def approximation_times(res: int = 256) -> list[dict]:
     return rows
 
 
+def cornell_box(integrator: dict, res: int) -> mi.Scene:
+    """Mitsuba's Cornell box (``mi.cornell_box()``), ``res``², box pixel filter."""
+    d = mi.cornell_box()
+    d["integrator"] = integrator
+    d["sensor"]["film"].update(width=res, height=res, rfilter={"type": "box"})
+    return mi.load_dict(d)
+
+
+def area_sweep(res: int = 128, ref_spp: int = 4096, aa: int = 4,
+               counts=(1, 4, 16, 64, 256), map_points: int = 16,
+               map_resolutions=(64, 256, 1024)) -> dict:
+    """``area_samples`` against path (max_depth 2) on the Cornell box: FLIP, mean absolute
+    error and warm render time per count, with shadow rays; ``map_points`` points with a
+    cube shadow map each at ``map_resolutions`` (FLIP also against the shadow-ray image
+    of as many points); the reference's noise floor (FLIP between its two halves) and
+    path's own FLIP and time at a few spp."""
+    from mi_displace.evaluate.metrics import flip as flip_error
+
+    path = cornell_box({"type": "path", "max_depth": 2}, res)
+    halves = [np.array(mi.render(path, spp=ref_spp // 2, seed=s))[..., :3] for s in (0, 1)]
+    reference = 0.5 * (halves[0] + halves[1])
+    record = {"scene": "mi.cornell_box()", "res": res, "aa": aa, "reference_spp": ref_spp,
+              "noise_floor_flip": float(flip_error(halves[0], halves[1])[0]), "raster": [],
+              "path": []}
+    rays = {}
+    settings = [{"area_samples": n} for n in sorted(set(counts) | {map_points})]
+    settings += [{"area_samples": map_points, "shadows": "map", "area_shadow_resolution": r}
+                 for r in map_resolutions]
+    for setting in settings:
+        sc = cornell_box(dict({"type": "raster", "aa": aa}, **setting), res)
+        img = _image(sc)
+        row = dict(setting, flip=float(flip_error(reference, img)[0]),
+                   mae=float(np.abs(img - reference).mean()),
+                   render_s=median_time(lambda: _image(sc), 3))
+        if "shadows" in setting:
+            row["flip_vs_shadow_rays"] = float(flip_error(rays[map_points], img)[0])
+        else:
+            rays[setting["area_samples"]] = img
+        record["raster"].append(row)
+    for spp in (4, 16, 64):
+        seed = 2   # the reference used seeds 0 and 1
+        img = np.array(mi.render(path, spp=spp, seed=seed))[..., :3]
+        record["path"].append({
+            "spp": spp, "flip": float(flip_error(reference, img)[0]),
+            "mae": float(np.abs(img - reference).mean()),
+            "render_s": median_time(lambda: np.array(mi.render(path, spp=spp, seed=seed)), 3)})
+    return record
+
+
 def figures(out_dir: Path) -> dict:
     """Write ``raster_spawn.json``, ``raster_consistency.json``, ``raster_shadow_sweep.json``,
     ``raster_shadow_sweep.png`` and ``raster_compare_times.json`` to ``out_dir``."""
@@ -527,10 +578,15 @@ if __name__ == "__main__":
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--figures", metavar="DIR", help="consistency + shadow-map trade")
+    parser.add_argument("--area-sweep", metavar="FILE", help="area_samples trade (JSON)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     mi_displace.init()
-    if args.figures:
+    if args.area_sweep:
+        sweep = area_sweep()
+        Path(args.area_sweep).write_text(_json.dumps(sweep, indent=2))
+        print(_json.dumps(sweep, indent=2))
+    elif args.figures:
         figures(Path(args.figures))
     else:
         main(json=args.json)

@@ -54,14 +54,15 @@ import json as _json
 import os
 import statistics
 import time
-from pathlib import Path
 from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-SCENES = Path(__file__).resolve().parents[2] / "scenes"
+from mi_displace.core.resources import scenes_dir
+
+SCENES = scenes_dir()
 RES = 512
 
 

@@ -26,15 +26,15 @@ import json as _json
 import os
 import tempfile
 import time
-from pathlib import Path
 from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
 
 from mi_displace.bench._timing import median_time
+from mi_displace.core.resources import scene_path
 
-SCENE = Path(__file__).resolve().parents[2] / "scenes" / "vdm_torus.xml"
+SCENE = scene_path("vdm_torus.xml")
 TARGETS = {"build_time_s": 10.0, "render_time_warm_s": 0.3, "compression_ratio": 10.0}
 
 

@@ -33,7 +33,6 @@ from __future__ import annotations
 import statistics
 import tempfile
 import time
-from pathlib import Path
 from typing import NamedTuple
 
 import drjit as dr
@@ -41,10 +40,10 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.bench._timing import print_record
+from mi_displace.core.resources import data_path, scene_path
 
-ROOT = Path(__file__).resolve().parents[2]
-WALNUT = ROOT / "data" / "volumes" / "walnut_128x96x114_uint16.raw"
-SCENE = ROOT / "scenes" / "volume_walnut_peel.xml"
+WALNUT = data_path("volumes", "walnut_128x96x114_uint16.raw")
+SCENE = scene_path("volume_walnut_peel.xml")
 RES, SIZE, ISO = 256, 512, 0.3
 EYE, TARGET, FOV = (0.9, -2.3, 1.3), (0.0, 0.0, 0.0), 34.0
 TARGETS = {"undisplaced_vs_vtk": 2.0, "displacement_overhead": 1.6}
@@ -108,7 +107,7 @@ def _interleaved_renders(scene, sensor, volumes, settings, repeats=REPEATS) -> l
     """(cold, warm median, warm median CPU time, image) per volume; the warm renders alternate
     between the volumes so that a shared machine's load falls on all of them alike (CPU time,
     i.e. process time of all threads, is the less load-sensitive of the two)."""
-    from mi_displace.volume import slicing
+    from mi_displace.volume import slicer
 
     times = [[] for _ in volumes]
     cpu = [[] for _ in volumes]
@@ -117,7 +116,7 @@ def _interleaved_renders(scene, sensor, volumes, settings, repeats=REPEATS) -> l
         for i, vol in enumerate(volumes):
             dr.sync_thread()
             start, start_cpu = time.perf_counter(), time.process_time()
-            images[i] = np.array(slicing.render(scene, sensor, vol, settings))
+            images[i] = np.array(slicer.render(scene, sensor, vol, settings))
             times[i].append(time.perf_counter() - start)
             cpu[i].append(time.process_time() - start_cpu)
     for img in images:
@@ -148,14 +147,14 @@ def table2() -> list[dict]:
 
 
 def run(sizes: Sizes = FULL, with_flip: bool = True) -> dict:
-    from mi_displace.volume import slicing
+    from mi_displace.volume import slicer
     from mi_displace.volume.displacement import DisplacementChain, PlacedMap
     from mi_displace.volume.field import DisplacedVolume
 
     obj = walnut_256(sizes.voxels)
     sensor = _sensor(sizes.size)
     scene = sun_scene()
-    settings = slicing.SliceSettings(model="surface", normals="jacobian", spacing=1.0, shadows=False, iso=ISO)
+    settings = slicer.SliceSettings(model="surface", normals="jacobian", spacing=1.0, shadows=False, iso=ISO)
     pull = PlacedMap(*PULL, resolution=PULL_RESOLUTION, to_world=PULL_TO_WORLD)
     plain = DisplacedVolume(obj, DisplacementChain([]), **VOLUME_KW)
     displaced = DisplacedVolume(obj, DisplacementChain([pull], bits=16), **VOLUME_KW)

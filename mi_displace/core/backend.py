@@ -58,8 +58,26 @@ def resolve_variant(variant: str | None = None) -> str:
     return variant
 
 
+def supported(variant: str | None) -> bool:
+    """Whether ``variant`` is one mi_displace's plugins can be registered for."""
+    return (variant is not None and variant.endswith("_rgb") and not variant.startswith("scalar")
+            and variant in mi.variants())
+
+
+def ensure_registered() -> None:
+    """Register the plugins for Mitsuba's current variant when it is a supported one and they
+    are not yet registered for it (after ``import mi_displace`` or an ``mi.set_variant``);
+    our loaders call it, so a variant change never ends in "Plugin not found"."""
+    from mi_displace import plugins
+
+    variant = mi.variant()
+    if supported(variant) and plugins.registered_variant() != variant:
+        init(variant)
+
+
 def init(variant: str | None = None) -> str:
-    """Set the Mitsuba variant and register every mi_displace plugin for it.
+    """Set the Mitsuba variant, register every mi_displace plugin for it and put the packaged
+    scenes on Mitsuba's file resolver (:func:`mi_displace.core.resources.add_to_file_resolver`).
 
     Call again after any ``mi.set_variant``: plugin classes derive from the variant's
     own ``mi.Mesh`` / ``mi.Texture`` / ... and are redefined for it.
@@ -75,6 +93,8 @@ def init(variant: str | None = None) -> str:
                          f"(use {DEFAULT_VARIANT} on the CPU)")
     mi.set_variant(variant)
     from mi_displace import plugins
+    from mi_displace.core.resources import add_to_file_resolver
 
     plugins.register_all()
+    add_to_file_resolver()
     return variant

@@ -19,9 +19,10 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.core.resources import data_path
 from mi_displace.core.surfaces import BaseSurface, SurfaceSample, principal_curvatures
 
-DEFAULT_TEAPOT = Path(__file__).resolve().parents[2] / "data" / "teapot" / "newell_teapot.txt"
+DEFAULT_TEAPOT = data_path("teapot", "newell_teapot.txt")
 TEAPOT_BODY = ((0, 1, 2, 3), (4, 5, 6, 7), (8, 9, 10, 11))  # rows of 0-based patch ids
 
 

@@ -659,20 +659,25 @@ def dice_mesh(faces: np.ndarray, weld: np.ndarray, edge_seg: np.ndarray, side_ed
                       edges=edge_seg)
 
 
-def redice(scene) -> list[str]:
-    """Re-dice every shape of ``scene`` that dices for sensors (has ``redice_for``).
+def fit_to_sensors(scene) -> list[str]:
+    """Size every shape of ``scene`` that sizes itself from sensors for the scene's sensors.
 
-    Shapes without sensors of their own take the scene's.  Call it after editing a sensor
-    through ``mi.traverse``: Mitsuba notifies only the sensor and the scene of such an edit,
-    not the shapes that were diced for it.  Rebuilds the scene's acceleration structure
-    when a shape changed.
+    The one way to fit a scene: each such shape (``displaced`` with ``dicing_rate``,
+    ``restored`` with ``levels="auto"``, ``ddm`` with ``map_resolution="auto"``) implements
+    ``fit_to_sensors(sensors) -> bool`` (True when it rebuilt); shapes that reference
+    sensors of their own (``<ref id="camera"/>``) keep them.  The CLI's loader
+    (:func:`mi_displace.render.scene.load`) calls this after ``mi.load_file``, so
+    ``mi.load_file`` + ``mi_displace.fit_to_sensors(scene)`` gives the same build.  Call it
+    again after editing a sensor through ``mi.traverse``: Mitsuba notifies only the sensor
+    and the scene of such an edit, not the shapes sized for it.  Rebuilds the scene's
+    acceleration structure when a shape changed.
 
     Returns:
         ids of the shapes that were rebuilt.
     """
     changed = []
     for shape in scene.shapes():
-        method = getattr(shape, "redice_for", None)
+        method = getattr(shape, "fit_to_sensors", None)
         if method is not None and method(scene.sensors()):
             changed.append(shape.id())
     if changed:

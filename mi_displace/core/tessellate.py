@@ -6,8 +6,12 @@ Two kinds of base:
   [0, 1]^2 with analytic shading normals
   N = P_u x P_v,  P_u = S_u + scale ((h - m) n_u + h_u n)  (likewise for v);
 * polygonal (a triangle mesh with UVs): every triangle split into level^2 triangles on a
-  barycentric grid, vertices shared across edges, displaced along the *interpolated* (smooth)
-  vertex normal n; shading normals are those of the displaced smooth surface,
+  barycentric grid, vertices shared across edges, displaced along the interpolated *welded*
+  direction (one per position: the angle-weighted normal of the welded surface,
+  :func:`welded_normals`) by one height per position (the mean of the sides' lookups at a
+  UV seam), so every copy of a position moves by the same vector and the surface stays
+  closed across UV seams and hard edges; shading normals are those of the displaced smooth
+  surface over the mesh's own vertex normals n,
   N = P_u x P_v with P_u = T_u + scale ((h - m) n_u + h_u n), where T_u is the interpolated
   tangent dS/du projected onto the plane of n (so zero height shades like the smooth base).
 
@@ -345,9 +349,10 @@ def smooth_displaced_normals(n, s_u, s_v, n_u, n_v, disp, grad, scale: float):
 def displace_mesh(positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray,
                   faces: np.ndarray, height, scale: float, midlevel: float,
                   level: int) -> Tessellation:
-    """Subdivide a triangle mesh with UVs and displace it along its interpolated normals.
+    """Subdivide a triangle mesh with UVs and displace it along its welded normals.
 
-    The displacement of UV-seam twins is averaged so the surface stays closed.  Shading
+    Every copy of a position (UV seams, hard edges) moves by one vector: the welded
+    direction (:func:`welded_normals`) times the mean of the copies' heights.  Shading
     normals are those of the displaced *smooth* surface (:func:`smooth_displaced_normals`
     over the interpolated frame of :func:`vertex_frames`), averaged over seam twins; at zero
     height they are the interpolated base normals, as a smooth-shaded base mesh has.
@@ -372,9 +377,60 @@ def weld_classes(positions: np.ndarray) -> np.ndarray:
     return weld.ravel()
 
 
+def welded_normals(positions: np.ndarray, normals: np.ndarray, faces: np.ndarray,
+                   weld: np.ndarray | None = None) -> np.ndarray:
+    """One displacement direction per position class: the angle-weighted normal of the
+    welded surface (Thürmer and Wüthrich 1998), identical for every copy (NumPy, one-off).
+
+    Each face adds its unit normal times its corner angle to the class of each corner.  A
+    face whose normal points against the sum of its corners' vertex normals counts flipped,
+    so the directions face the way the mesh's own normals do whatever the winding.  A class
+    whose sum vanishes (isolated vertices, a sheet folded onto itself) takes the mean of its
+    vertex normals, else +z.
+
+    Args:
+        positions: (V, 3) float vertex positions [object units].
+        normals: (V, 3) float vertex normals (orientation and fallback only).
+        faces: (F, 3) int triangles.
+        weld: (V,) int position class (:func:`weld_classes` when ``None``).
+
+    Returns:
+        (V, 3) float32 unit directions, equal within a class.
+    """
+    p = np.asarray(positions, np.float64)
+    nrm = np.asarray(normals, np.float64)
+    f = np.asarray(faces, np.int64)
+    weld = weld_classes(positions) if weld is None else np.asarray(weld, np.int64)
+    fn = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+    fn *= np.where(np.einsum("ij,ij->i", fn, nrm[f].sum(1)) < 0, -1.0, 1.0)[:, None]
+    fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
+    acc = np.zeros((int(weld.max()) + 1, 3))
+    fallback = np.zeros_like(acc)
+    np.add.at(fallback, weld, nrm)
+    for k in range(3):
+        a = p[f[:, (k + 1) % 3]] - p[f[:, k]]
+        b = p[f[:, (k + 2) % 3]] - p[f[:, k]]
+        angle = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+        np.add.at(acc, weld[f[:, k]], fn * angle[:, None])
+    for candidate in (fallback, np.broadcast_to([0.0, 0.0, 1.0], acc.shape)):
+        length = np.linalg.norm(acc, axis=1, keepdims=True)
+        acc = np.where(length > 1e-12, acc, candidate)
+    return (acc / np.linalg.norm(acc, axis=1, keepdims=True))[weld].astype(np.float32)
+
+
+def split_positions(normals: np.ndarray, weld: np.ndarray) -> int:
+    """Number of position classes whose copies carry different vertex normals (UV seams
+    with per-side normals, hard edges): where per-vertex directions would crack."""
+    key = np.concatenate([np.asarray(weld, np.int64)[:, None],
+                          (np.asarray(normals, np.float32) + np.float32(0)).view(np.int32)], 1)
+    pairs = np.unique(key, axis=0)[:, 0]
+    return int((np.bincount(pairs) > 1).sum())
+
+
 def displace_mesh_vertices(positions, normals, uvs, faces, src: np.ndarray, bary: np.ndarray,
                            group: np.ndarray, new_faces: np.ndarray, height, scale: float,
-                           midlevel: float, frames: tuple | None = None) -> Tessellation:
+                           midlevel: float, frames: tuple | None = None,
+                           directions: np.ndarray | None = None) -> Tessellation:
     """Displace the vertices of any refinement of a base mesh (:func:`displace_mesh`'s kernel).
 
     Args:
@@ -386,6 +442,8 @@ def displace_mesh_vertices(positions, normals, uvs, faces, src: np.ndarray, bary
         height, scale, midlevel: as :func:`displace_parametric`.
         frames: :func:`vertex_frames` of the base mesh, when already computed (a
             re-displacement of the same base); computed here when ``None``.
+        directions: (V, 3) unit displacement direction of each base vertex;
+            :func:`welded_normals` (one per position: watertight) when ``None``.
     """
     idx = [mi.UInt32(np.ascontiguousarray(src[:, k], np.uint32)) for k in range(3)]
     wts = [mi.Float(np.ascontiguousarray(bary[:, k], np.float32)) for k in range(3)]
@@ -401,19 +459,28 @@ def displace_mesh_vertices(positions, normals, uvs, faces, src: np.ndarray, bary
     uv = mi.Point2f(interp(uvs))
     s_u, s_v, n_u, n_v = (interp(a) for a in (vertex_frames(positions, normals, uvs, faces)
                                                  if frames is None else frames))
-    # between vertex normals that cancel (a crease whose sides share vertices) fall back to
-    # the tangent frame's normal, else +z: never a NaN
-    n_raw, frame = interp(normals), dr.cross(s_u, s_v)
-    n = dr.normalize(dr.select(dr.squared_norm(n_raw) > 1e-12, n_raw, dr.select(
-        dr.squared_norm(frame) > 0, frame, mi.Vector3f(0, 0, 1))))
+    frame = dr.cross(s_u, s_v)
+
+    def unit(n_raw):
+        # between normals that cancel (a crease whose sides share vertices) fall back to the
+        # tangent frame's normal, else +z: never a NaN
+        return dr.normalize(dr.select(dr.squared_norm(n_raw) > 1e-12, n_raw, dr.select(
+            dr.squared_norm(frame) > 0, frame, mi.Vector3f(0, 0, 1))))
+
+    n = unit(interp(normals))                       # shading frame: the mesh's own normals
+    if directions is None:
+        directions = welded_normals(positions, normals, faces)
+    # edge points interpolate their edge's two welded ends in canonical order (the topology's
+    # src / bary), so every copy of a position gets the same direction bit for bit
+    direction = unit(interp(directions))
     groups = mi.UInt32(np.ascontiguousarray(group, np.uint32))
     n_groups = int(group.max()) + 1
     p, disp, grad = base_p, None, None
     if height is not None:
         h, grad = height(uv)
-        # UV-seam twins: one displacement per position class (eq. of a welded vertex)
+        # one height per position class: the mean of the sides' lookups (UV seams)
         disp = group_mean(scale * (h - midlevel), groups, n_groups)
-        p = base_p + disp * n
+        p = base_p + disp * direction
     normal = smooth_displaced_normals(n, s_u, s_v, n_u, n_v, disp, grad, scale)
     # seam twins whose normals cancel (a fold of the offset surface) keep n: never a NaN
     mean = group_mean(normal, groups, n_groups)
@@ -421,7 +488,7 @@ def displace_mesh_vertices(positions, normals, uvs, faces, src: np.ndarray, bary
     f = mi.Vector3u(*[mi.UInt32(np.ascontiguousarray(new_faces[:, k], np.uint32))
                       for k in range(3)])
     return Tessellation(positions=p, normals=normal, texcoords=uv, faces=f,
-                        base_positions=base_p, base_normals=n, displacement=disp)
+                        base_positions=base_p, base_normals=direction, displacement=disp)
 
 
 def group_mean(value, groups: mi.UInt32, n_groups: int):

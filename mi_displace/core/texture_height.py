@@ -6,6 +6,9 @@ differences with a step of half a tessellation cell.
 """
 from __future__ import annotations
 
+import re
+import warnings
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -41,6 +44,38 @@ def check_texture_finite(texture: mi.Texture, name: str = "height") -> None:
                     f"'{name}' texture {texture.id() or type(texture).__name__!r} holds "
                     f"{bad} NaN/Inf texel value(s); clean the height map first"
                 )
+
+
+#: Image formats Mitsuba's bitmap reads as sRGB-encoded colour unless ``raw`` is set.
+SRGB_FORMATS = (".png", ".jpg", ".jpeg", ".bmp", ".tga", ".ppm")
+
+
+def bitmap_decodes_srgb(texture: mi.Texture) -> bool:
+    """Whether ``texture`` is a ``bitmap`` of an 8/16-bit image file read without
+    ``raw="true"`` (its texels are sRGB-decoded to linear values before use).
+
+    Platform workaround (``docs/platform.md``): Mitsuba 3.9.1's bitmap texture has no
+    accessor for its ``raw`` flag or its file name; both are read from its description.
+    Any other texture, a Python one without ``to_string`` included, is not a bitmap."""
+    if not texture.class_name().startswith("BitmapTexture"):
+        return False
+    text = str(texture)
+    raw = re.search(r"^\s*raw = (\d)", text, re.M)
+    name = re.search(r'^\s*name = "(.*)"', text, re.M)
+    return (raw is not None and raw[1] == "0" and name is not None
+            and name[1].lower().endswith(SRGB_FORMATS))
+
+
+def warn_if_srgb(texture: mi.Texture, plugin: str, name: str = "height") -> None:
+    """Warn (naming the parameter and the fix) for a height bitmap that is gamma-decoded:
+    a height map stores numbers, not colours, so its values shift (a JPEG height map by
+    about a fifth of its range on average)."""
+    if bitmap_decodes_srgb(texture):
+        message = (f"{plugin}: parameter '{name}' is a bitmap read as sRGB colour, so its "
+                   f"heights are gamma-decoded; add <boolean name=\"raw\" value=\"true\"/> "
+                   f"to the bitmap ('raw': True in load_dict)")
+        warnings.warn(message)
+        mi.Log(mi.LogLevel.Warn, message)
 
 
 def height_function(texture: mi.Texture, fd_step: float):

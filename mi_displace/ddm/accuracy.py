@@ -20,6 +20,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.core.resources import data_path, scene_path
 from mi_displace.ddm import base_maps, mapping
 from mi_displace.ddm import normals as nrm
 from mi_displace.ddm.model import DDMConfig, DDMModel
@@ -80,11 +81,10 @@ def _stretch(p: np.ndarray, vertex_count: list) -> dict:
 
 
 #: the mesh bases of the UV-chart table: Spot (13 charts) and the xatlas genus-1 mesh
-ROOT = Path(__file__).resolve().parents[2]
 CHART_BASES = {
-    "spot": dict(base="mesh", filename=str(ROOT / "data" / "spot" / "spot_triangulated.obj"),
+    "spot": dict(base="mesh", filename=str(data_path("spot", "spot_triangulated.obj")),
                  tile="chain", tiles_u=32, tiles_v=32, height=0.03),
-    "genus1": dict(base="mesh", filename=str(ROOT / "scenes" / "parts" / "ddm_genus1" / "genus1.obj"),
+    "genus1": dict(base="mesh", filename=str(scene_path("parts", "ddm_genus1", "genus1.obj")),
                    tile="chain", tiles_u=32, tiles_v=32, height=0.05),
 }
 
@@ -180,7 +180,7 @@ def plot_geometry_images(path: Path, resolution: int = 256) -> dict:
 
     from mi_displace.ddm.model import make_base
 
-    spot = str(Path(__file__).resolve().parents[2] / "data" / "spot" / "spot_triangulated.obj")
+    spot = str(data_path("spot", "spot_triangulated.obj"))
     fig = Figure(figsize=(9, 4.8))
     FigureCanvasAgg(fig)
     info = {}

@@ -227,14 +227,12 @@ def build_maps(base, ru: int, rv: int | None = None) -> GeometryImage:
     texel) with validity = covered.  Degenerate normals make a texel invalid.  Invalid
     texels get the diffusion-filled values of :func:`diffuse_fill`.
     """
-    from mi_displace.ddm.mesh_base import MeshBase
-
     ru = check_resolution(ru)
     rv = ru if rv is None else check_resolution(rv)
     start = time.perf_counter()
     pu, pv = bool(base.periodic_u), bool(base.periodic_v)
     u, v = texel_coordinates(ru, rv, pu, pv)
-    if isinstance(base, MeshBase):
+    if hasattr(base, "locate"):   # a polygonal base (MeshBase): no analytic S(u, v) to sample
         covered, prim, b1, b2 = base.locate(u, v)
         p, nn = base.interpolate(prim, b1, b2)
         n = nn / dr.maximum(dr.norm(nn), 1e-20)

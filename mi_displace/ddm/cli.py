@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+from mi_displace.core.resources import FIGURES_DIR, scene_path
 
 
 def _cmd_animate(args) -> int:
@@ -32,7 +32,7 @@ def _cmd_figures(args) -> int:
         chart_accuracy(args.out)
         print((args.out / "ddm_charts.md").read_text())
         return 0
-    record = write_figures(args.out, ROOT / "scenes" / "ddm_thorns_sphere.xml", quick=args.quick)
+    record = write_figures(args.out, scene_path("ddm_thorns_sphere.xml"), quick=args.quick)
     for row in record["accuracy"]:
         print(f"R={row['resolution']:5d}  rms/diag {row['rms_error_rel']:.3g}  "
               f"max/diag {row['max_error_rel']:.3g}  normal mean {row['normal_mean_deg']:.3g} deg")
@@ -50,7 +50,7 @@ def add_commands(sub) -> dict:
     animation_options(p)
 
     p = sub.add_parser("ddm-figures", help="DDM accuracy table/plot and map_resolution sweep")
-    p.add_argument("--out", type=Path, default=ROOT / "docs" / "figures", help="output folder")
+    p.add_argument("--out", type=Path, default=FIGURES_DIR, help="output folder")
     p.add_argument("--quick", action="store_true", help="fewer resolutions, low-spp reference")
     p.add_argument("--charts", action="store_true",
                    help="only the UV-chart table (maps vs exact on Spot and the genus-1 mesh)")

@@ -19,7 +19,7 @@ import numpy as np
 from mi_displace.core import surfaces
 from mi_displace.core.mesh_io import load_uv_mesh, resolve_path
 from mi_displace.ddm import animation as anim
-from mi_displace.ddm import base_maps, charts, mapping
+from mi_displace.ddm import base_maps, charts, footprint, mapping
 from mi_displace.ddm.layout import make_layout
 from mi_displace.ddm.tiles import Tile, get_tile
 
@@ -42,18 +42,11 @@ def _scalar(x):
     return x if dr.is_array_v(x) and dr.grad_enabled(x) else _value(x)
 
 
-class _SensorFit:
-    """Whether the scene being loaded will call ``fit_to_sensors`` on its ``ddm`` shapes
-    (:func:`mi_displace.render.scene.load` does): then ``map_resolution="auto"`` skips the
-    sensor-free tolerance search and builds a provisional map until the sensors are known.
-    Process-wide, not per thread: Mitsuba builds a scene's plugins on its worker threads."""
-
-    pending = False
 
 
-SENSOR_FIT = _SensorFit()
-#: provisional resolution of ``auto`` while a sensor fit is pending
-AUTO_PROVISIONAL = 16
+def _footprint_rule(dicing_rate: float, sensors: int) -> str:
+    """``build_stats["map_resolution_rule"]`` of a footprint-sized ``auto``."""
+    return f"auto: screen footprint, {dicing_rate:g} px per texel over {sensors} sensor(s)"
 
 
 class FoldingWarning(UserWarning):
@@ -136,7 +129,9 @@ class DDMConfig:
 class DDMModel:
     """The preprocessed DDM scene element; :meth:`map` maps all tiles at a time t."""
 
-    def __init__(self, cfg: DDMConfig, base=None):
+    def __init__(self, cfg: DDMConfig, base=None, sensors=(), to_world=None):
+        """``sensors`` (with the shape's ``to_world``): size ``map_resolution="auto"`` for
+        them at once (:meth:`fit_to_sensors`); without, by the sensor-free tolerance rule."""
         start = time.perf_counter()
         self.cfg = cfg.check()
         self.tiles: list[Tile] = [get_tile(_resolve_tile(s)) for s in str(cfg.tile).split(",")
@@ -181,8 +176,10 @@ class DDMModel:
                 raise ValueError("ddm: no tile touches the base mesh's UV layout")
             self.reach = charts.tile_reach(self.tiles, layout.size)
         if cfg.mode == "maps":
-            if self.auto and SENSOR_FIT.pending:     # fit_to_sensors follows at once
-                cfg.map_resolution, self.resolution_rule = AUTO_PROVISIONAL, "auto: provisional"
+            if self.auto and sensors:
+                cfg.map_resolution, self.footprint = footprint.resolution(
+                    self.base, sensors, to_world, cfg.dicing_rate)
+                self.resolution_rule = _footprint_rule(cfg.dicing_rate, len(sensors))
             elif self.auto:
                 cfg.map_resolution, self.auto_trials = self._resolution_by_tolerance()
                 self.resolution_rule = (f"auto: tolerance {cfg.tolerance:g} of the diagonal "
@@ -228,13 +225,10 @@ class DDMModel:
         Returns:
             True when the maps changed (the caller re-maps the vertices).
         """
-        from mi_displace.ddm import footprint
-
         if not self.auto or self.cfg.mode != "maps":
             return False
         r, info = footprint.resolution(self.base, sensors, to_world, self.cfg.dicing_rate)
-        self.resolution_rule = (f"auto: screen footprint, {self.cfg.dicing_rate:g} px per texel "
-                                f"over {len(sensors)} sensor(s)")
+        self.resolution_rule = _footprint_rule(self.cfg.dicing_rate, len(sensors))
         self.footprint = info
         if r == self.maps.ru:
             return False

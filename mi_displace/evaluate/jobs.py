@@ -28,6 +28,8 @@ import time
 import traceback
 from typing import Callable, Iterable
 
+from mi_displace.core.extras import require
+
 #: Scheduler address of a Dask cluster started for the caller on this machine.
 LOCAL_PREFIX = "local:"
 
@@ -57,6 +59,7 @@ def check_cluster(cluster: str | None) -> None:
     Raises:
         ValueError: neither ``local:N`` with ``N >= 1`` nor a ``tcp://``/``tls://``/``ucx://``
             scheduler address.
+        MissingExtraError: Dask's ``distributed`` is not installed (the ``[cluster]`` extra).
     """
     if cluster is None:
         return
@@ -64,17 +67,18 @@ def check_cluster(cluster: str | None) -> None:
         count = cluster[len(LOCAL_PREFIX):]
         if not count.isdigit() or int(count) < 1:
             raise ValueError(f"--cluster: expected local:N with N >= 1 workers, got {cluster!r}")
-        return
-    if not any(cluster.startswith(p) for p in ("tcp://", "tls://", "ucx://", "inproc://")):
+    elif not any(cluster.startswith(p) for p in ("tcp://", "tls://", "ucx://", "inproc://")):
         raise ValueError(f"--cluster: expected a scheduler address such as tcp://HOST:8786 "
                          f"or local:N, got {cluster!r}")
+    require("distributed", "cluster", "--cluster")
 
 
 class _Cluster:
     """A connected Dask client (and the local cluster it owns, if it started one)."""
 
     def __init__(self, cluster: str):
-        from distributed import Client, LocalCluster
+        distributed = require("distributed", "cluster", "--cluster")
+        Client, LocalCluster = distributed.Client, distributed.LocalCluster
 
         self.local = None
         if cluster.startswith(LOCAL_PREFIX):
@@ -145,9 +149,8 @@ def run_jobs(fn: Callable, jobs: Iterable[dict], cluster: str | None = None,
 
 
 def _run_on_cluster(fn, jobs, cluster, variant, finish) -> None:
-    from distributed import as_completed
-
     connection = _Cluster(cluster)
+    as_completed = require("distributed", "cluster", "--cluster").as_completed
     try:
         futures = {connection.client.submit(_run_one, fn, job, variant, pure=False): index
                    for index, job in enumerate(jobs)}

@@ -24,11 +24,11 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.core.resources import data_path, scene_path
 from mi_displace.inverse import recover
 
-ROOT = Path(__file__).resolve().parents[2]
-BAKE = ROOT / "scenes" / "parts" / "bake_bunny"
-SCAN = ROOT / "data" / "bunny" / "stanford-bunny.obj"
+BAKE = scene_path("parts", "bake_bunny")
+SCAN = data_path("bunny", "stanford-bunny.obj")
 CENTRE, UP = [-0.017, 0.095, 0.0], [0, 1, 0]
 
 

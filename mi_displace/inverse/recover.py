@@ -23,8 +23,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-BRICKS = ROOT / "data" / "textures" / "Bricks102_1K-JPG_Displacement.jpg"
+from mi_displace.core.resources import data_path
+
+BRICKS = data_path("textures", "Bricks102_1K-JPG_Displacement.jpg")
 KEY = "surface.height.data"
 
 

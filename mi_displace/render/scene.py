@@ -26,7 +26,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.core.dicing import redice
+from mi_displace.core.backend import ensure_registered
+from mi_displace.core.dicing import fit_to_sensors
 from mi_displace.core.progress import bar as progress_bar
 
 #: Largest number of samples (pixels x spp) rendered in one ``mi.render`` call; larger
@@ -145,7 +146,9 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
         FileNotFoundError: ``path`` does not exist.
         ValueError: Mitsuba rejects the scene or a parameter (message names the file), or
             the scene has no integrator or no sensor, or a shape's BSDF is not set up
-            (its ``setup_problem()``: a ``vdm`` without ``tile_size`` outside a ``vdm_mesh``).
+            (its ``setup_problem()``: a ``vdm`` without ``tile_size`` outside a ``vdm_mesh``),
+            or the integrator cannot render the scene (its ``setup_problem(scene)``: an
+            emitter ``raster`` does not model).
     """
     path = Path(path)
     if not path.is_file():
@@ -153,27 +156,23 @@ def load(path: str | os.PathLike, **params) -> tuple[mi.Scene, dict]:
     params = check_params(params)
     if mi.variant() is None:
         raise RuntimeError("no Mitsuba variant is set: call mi_displace.init() first")
+    ensure_registered()            # the plugins of the variant set now (after mi.set_variant)
     dr.sync_thread()
     start = time.perf_counter()
-    from mi_displace.ddm.model import SENSOR_FIT
-
-    SENSOR_FIT.pending = True      # ddm "auto" waits for the sensors (fitted below)
     try:
         scene = mi.load_file(str(path), **params)
-        # shapes that dice for the scene's sensors but reference none of their own
-        redice(scene)
+        # shapes sized for the scene's sensors but referencing none of their own
+        fit_to_sensors(scene)
     except RuntimeError as e:
         raise _translate_load_error(path, e) from None
-    finally:
-        SENSOR_FIT.pending = False
-    for shape in scene.shapes():   # shapes whose quality follows the sensors (ddm "auto")
-        fit = getattr(shape, "fit_to_scene", None)
-        if fit is not None:
-            fit(scene)
     for shape in scene.shapes():   # a BSDF that cannot render what it models (vdm without a tile size)
         problem = getattr(shape.bsdf(), "setup_problem", lambda: None)()
         if problem:
             raise ValueError(f"scene {str(path)!r}: {problem}")
+    # an integrator that cannot render the scene (raster: an emitter it does not model)
+    problem = getattr(scene.integrator(), "setup_problem", lambda scene: None)(scene)
+    if problem:
+        raise ValueError(f"scene {str(path)!r}: {problem}")
     dr.sync_thread()
     build_s = time.perf_counter() - start
     for what, found in (("integrator", scene.integrator()), ("sensor", scene.sensors())):

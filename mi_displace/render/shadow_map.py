@@ -3,7 +3,8 @@
 
 * spot light: one perspective map over its cone (half-angle = ``cutoff_angle``);
 * point light: a cube map, six 90-degree perspective faces;
-* directional light: one orthographic map over the scene's bounding sphere.
+* directional light: one orthographic map over the scene's bounding sphere;
+* a point of an area light (:func:`point_views`): a cube map like a point light's.
 
 A point P is looked up at P + n texel normal_offset sin(theta) (normal-offset shadows:
 n the geometric normal on the light's side, theta its angle to the light, ``texel`` the
@@ -90,21 +91,38 @@ def light_views(emitter: mi.Emitter, bbox: mi.ScalarBoundingBox3f, res: int) -> 
         return [_perspective(_frame(origin, to_world[:3, 2]), tan_half, res, NEAR * radius,
                              1.01 * far)]
     if kind == "PointLight":
-        origin = np.array(params["position"], float).reshape(3)
-        far = 1.01 * (np.linalg.norm(origin - centre) + radius)
-        return [_perspective(_frame(origin, axis), 1.0, res, NEAR * radius, far)
-                for axis in _CUBE_AXES]
+        return point_views(np.array(params["position"], float).reshape(3), bbox, res)
     raise ValueError(f"raster: shadows='map' supports point, spot and directional lights, "
                      f"not {kind!r} (use shadows='ray')")
+
+
+def point_views(origin, bbox: mi.ScalarBoundingBox3f, res: int) -> list:
+    """The six 90-degree faces of a cube map at ``origin`` (3,) over a scene in ``bbox``.
+
+    The far plane reaches the far side of the scene's bounding sphere; it is the same for
+    every origin inside that sphere (the points of an area light), so their maps share
+    compiled kernels."""
+    origin = np.asarray(origin, float)
+    centre = np.array(bbox.center(), float)
+    radius = max(float(np.linalg.norm(np.array(bbox.extents(), float))) / 2, 1e-30)
+    far = 1.01 * (max(float(np.linalg.norm(origin - centre)), radius) + radius)
+    return [_perspective(_frame(origin, axis), 1.0, res, NEAR * radius, far)
+            for axis in _CUBE_AXES]
 
 
 def build(emitter: mi.Emitter, geom: zbuffer.Geometry, res: int, constant: float,
           normal_offset: float) -> ShadowMap:
     """Rasterise the shadow map of ``emitter`` over ``geom``."""
-    views = light_views(emitter, geom.bbox, res)
+    return build_views(light_views(emitter, geom.bbox, res), geom, res, constant,
+                       normal_offset, f"the {emitter.class_name()} shadow map")
+
+
+def build_views(views: list, geom: zbuffer.Geometry, res: int, constant: float,
+                normal_offset: float, what: str) -> ShadowMap:
+    """Rasterise the depth maps of ``views`` over ``geom`` (``what`` names them in the
+    memory error)."""
     # depth bits + float depth per texel and face
-    zbuffer.check_memory(len(views) * res * res,
-                         f"the {emitter.class_name()} shadow map ({len(views)} x {res}^2)", 8)
+    zbuffer.check_memory(len(views) * res * res, f"{what} ({len(views)} x {res}^2)", 8)
     depth = []
     for view in views:  # 1 or 6 faces
         bits, _ = zbuffer.rasterise(view, geom, with_ids=False)

@@ -187,12 +187,18 @@ class View:
 
     @cached_property
     def to_clip(self) -> mi.Transform4f:
-        """World -> clip transform (composed in float64, applied in float32)."""
+        """World -> clip transform (composed in float64, applied in float32).
+
+        Opaque: a kernel reads it as a parameter, so views that differ only in placement
+        (cube faces, shadow maps of many light points, a moving camera) share one compiled
+        kernel instead of each compiling its own."""
         a = np.eye(4)
         a[0, 0], a[1, 1] = 1 / self.dq[0], 1 / self.dq[1]
         column = 2 if self.perspective else 3
         a[0, column], a[1, column] = -self.q0[0] / self.dq[0], -self.q0[1] / self.dq[1]
-        return mi.Transform4f((a @ self.to_local).astype(np.float32))
+        transform = mi.Transform4f((a @ self.to_local).astype(np.float32))
+        dr.make_opaque(transform)
+        return transform
 
     def homogeneous(self, p: mi.Point3f) -> mi.Vector3f:
         """h(p) of clip points: (x, y, z) in perspective, (x, y, 1) in orthographic views."""

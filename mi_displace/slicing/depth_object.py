@@ -98,15 +98,17 @@ class DepthImages:
 # making the images
 
 def face_sensor(center, half: float, face: int, resolution: int) -> mi.Sensor:
-    """The orthographic sensor of face ``face`` (looking into the cube)."""
+    """The orthographic sensor of face ``face`` (looking into the cube) from 2.5 ``half``
+    off the centre; its clip planes are sized from the cube (0.5 and 5 ``half``), so a
+    model in millimetres or kilometres is captured alike."""
     axis, sign = FACES[face]
     e = np.eye(3)
     origin = np.asarray(center, np.float64) + sign * 2.5 * half * e[axis]
     up = e[(axis + 2) % 3]
     to_world = mi.ScalarTransform4f().look_at(origin=origin.tolist(), target=list(map(float, center)),
                                                up=up.tolist()) @ mi.ScalarTransform4f().scale([half, half, 1.0])
-    return mi.load_dict({"type": "orthographic", "to_world": to_world, "near_clip": 1e-3,
-                         "far_clip": 1e3,
+    return mi.load_dict({"type": "orthographic", "to_world": to_world, "near_clip": 0.5 * half,
+                         "far_clip": 5.0 * half,
                          "film": {"type": "hdrfilm", "width": resolution, "height": resolution}})
 
 
@@ -275,13 +277,20 @@ def _texture(images: np.ndarray, nearest: bool) -> list[mi.Texture2f]:
 class DepthObject:
     """The renderer of §4.1 / §4.2 over :class:`DepthImages`.
 
+    The images and the cube live in object space; ``to_world`` places them in the scene.
+    The public methods (:meth:`find`, :meth:`normal`, :meth:`color`, :meth:`occluded`)
+    take and return world points and directions; the slicing itself runs in object space
+    (the ray parameter t is shared), so any affine ``to_world``, a non-uniform scale too,
+    is honoured exactly.
+
     Args:
         images: the six images; slices: N planes across the cube in the best direction;
-        hull: visual hull (binary silhouettes, §5) instead of depth.
+        hull: visual hull (binary silhouettes, §5) instead of depth;
+        to_world: (4, 4) object-to-world matrix (default: identity).
     """
 
-    def __init__(self, images: DepthImages, slices: int, hull: bool = False):
-        from mi_displace.slicing.geometry import MAX_SLICES
+    def __init__(self, images: DepthImages, slices: int, hull: bool = False, to_world=None):
+        from mi_displace.slicing.geometry import MAX_SLICES, transform_pair
 
         if not (isinstance(slices, int) and 1 <= slices <= MAX_SLICES):
             raise ValueError(f"depth object: 'slices' must be an integer in [1, {MAX_SLICES}], got {slices!r}")
@@ -294,6 +303,8 @@ class DepthObject:
         self.normal_tex = None if images.normal is None else _texture(images.normal, nearest=False)
         self.occupancy = mi.Bool(occupancy(images.alpha(self.hull)).ravel())
         self.skip_empty = True   # empty-space skipping (same result; off: every plane tested)
+        self.matrix = np.eye(4) if to_world is None else np.asarray(to_world, np.float64)
+        self.to_world, self.to_object = transform_pair(self.matrix)
         self.stats = {"slices": slices, "hull": self.hull, "resolution": images.resolution,
                       "bytes": images.nbytes()}
 
@@ -350,11 +361,15 @@ class DepthObject:
 
         return skip
 
-    def find(self, o: mi.Point3f, d: mi.Vector3f, active: mi.Bool):
-        """Front-most slice point inside the object: (found, p)."""
+    def _local(self, p: mi.Point3f, d: mi.Vector3f):
+        """World point and direction in object space (d not renormalised: same t)."""
+        return self.to_object @ mi.Point3f(p), self.to_object @ mi.Vector3f(d)
+
+    def _find_local(self, o: mi.Point3f, d: mi.Vector3f, active: mi.Bool):
+        """Front-most slice point inside the object, object space: (found, t)."""
         t_in, t_out = self.slab(o, d)
         ad = [dr.abs(d[k]) for k in range(3)]
-        found, p = dr.zeros(mi.Bool, dr.width(o)), mi.Point3f(o)
+        found, t_hit = dr.zeros(mi.Bool, dr.width(o)), dr.zeros(mi.Float, dr.width(o))
         first = (ad[0] >= ad[1]) & (ad[0] >= ad[2])
         second = ~first & (ad[1] >= ad[2])
         masks = (first, second, ~first & ~second)   # the axis d is most parallel to
@@ -365,8 +380,14 @@ class DepthObject:
                                         t_in, t_out, self.inside, mine, self.n + 2,
                                         self.skip(o, d) if self.skip_empty else None)
             found |= ok
-            p = dr.select(ok, o + t * d, p)
-        return found, p
+            t_hit = dr.select(ok, t, t_hit)
+        return found, t_hit
+
+    def find(self, o: mi.Point3f, d: mi.Vector3f, active: mi.Bool):
+        """Front-most slice point inside the object along the world ray ``o + t d``:
+        (found, p), p a world point (``o`` where nothing was found)."""
+        found, t = self._find_local(*self._local(o, d), active)
+        return found, mi.Point3f(o + dr.select(found, t, 0.0) * d)
 
     def weights(self, d: mi.Vector3f):
         """§4.2: (face index, weight) of the three faces facing a viewer looking along d."""
@@ -387,11 +408,17 @@ class DepthObject:
         return value
 
     def color(self, p: mi.Point3f, d: mi.Vector3f) -> mi.Color3f:
-        """View-dependent colour (§4.2) at p for a viewer looking along d."""
-        return mi.Color3f(self._blend(self.color_tex, p, d))
+        """View-dependent colour (§4.2) at world point p for a viewer looking along d."""
+        return mi.Color3f(self._blend(self.color_tex, *self._local(p, d)))
 
     def normal(self, p: mi.Point3f, d: mi.Vector3f) -> mi.Vector3f:
-        """Shading normal at p: the normal images blended like the colour (reshading, §7);
+        """Unit world shading normal at world point p (viewer looking along d): the
+        object-space normal through ``to_world``'s inverse transpose."""
+        n = self._normal_local(*self._local(p, d))
+        return dr.normalize(mi.Vector3f(self.to_world @ mi.Normal3f(n)))
+
+    def _normal_local(self, p: mi.Point3f, d: mi.Vector3f) -> mi.Vector3f:
+        """Object-space normal: the normal images blended like the colour (reshading, §7);
         without normal images, the cube face normal of the best-facing image."""
         if self.normal_tex is not None:
             n = self._blend(self.normal_tex, p, d)
@@ -406,6 +433,8 @@ class DepthObject:
         return best
 
     def occluded(self, p: mi.Point3f, normal: mi.Vector3f, wl: mi.Vector3f, active: mi.Bool) -> mi.Bool:
-        """Whether the object blocks direction ``wl`` from p (the ray starts 1.5 slice
-        spacings off p along ``normal``)."""
-        return self.find(p + normal * (1.5 * self.delta), wl, active)[0]
+        """Whether the object blocks world direction ``wl`` from world point p (the ray
+        starts 1.5 slice spacings off p along ``normal``, in object space)."""
+        p_obj, wl_obj = self._local(p, wl)
+        n_obj = dr.normalize(mi.Vector3f(self.to_object @ mi.Normal3f(normal)))
+        return self._find_local(p_obj + n_obj * (1.5 * self.delta), wl_obj, active)[0]

@@ -27,9 +27,10 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.core.resources import scenes_dir
 from mi_displace.evaluate import tradeoff as tr
 
-SCENES = Path(__file__).resolve().parents[2] / "scenes"
+SCENES = scenes_dir()
 DIRECTIONS = ("a", "b", "c", "best", "screen")
 
 

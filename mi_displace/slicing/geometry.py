@@ -1,8 +1,9 @@
 """The slice polygons of displacement by slicing (§3) and the displacement volume.
 
 The *displacement volume* of a base polygon is its prism extruded along the interpolated
-vertex normals up to the maximum displacement ``scale``: a point of it is
-``P(b, h) = sum_i b_i (P_i + h scale n_i)`` (barycentrics b, normalised height h in [0, 1]).
+vertex directions up to the maximum displacement ``scale``: a point of it is
+``P(b, h) = sum_i b_i (P_i + h scale n_i)`` (barycentrics b, normalised height h in [0, 1];
+on a mesh base n_i is the welded normal, one per position, as ``displaced`` uses).
 The slices are the polygons a GPU draws through it, built once here with NumPy (one-off
 precomputation; the per-pixel work is in :mod:`mi_displace.slicing.trace`):
 
@@ -61,8 +62,9 @@ class BaseMesh:
         uvs: (V, 2) texture coordinates; faces: (F, 3) int64 vertex indices.
         su, sv: (V, 3) tangents dS/du, dS/dv [world units per unit uv].
         base: the parametric base (``None`` for a mesh file); to_world: (4, 4) matrix.
-        extrude: (V, 3) world displacement per unit of ``scale`` (the object-space normal
-            through to_world, as ``displaced`` displaces in object space); None: normals.
+        extrude: (V, 3) world displacement per unit of ``scale`` (the object-space
+            direction through to_world, as ``displaced`` displaces in object space: on a
+            mesh base the welded normal of :func:`tessellate.welded_normals`); None: normals.
     """
 
     positions: np.ndarray
@@ -94,6 +96,17 @@ class BaseMesh:
         """Mean edge length of the base polygons [world units]."""
         p = self.positions[self.faces]
         return float(np.mean(np.linalg.norm(p - np.roll(p, 1, axis=1), axis=2)))
+
+    def in_object_space(self) -> "BaseMesh":
+        """The same base before ``to_world`` (positions, tangents and extrusion mapped back
+        by its inverse; normals are the extrusion directions made unit)."""
+        m = np.asarray(self.to_world, np.float64)
+        inv = np.linalg.inv(m[:3, :3])
+        back = lambda v: v @ inv.T
+        extrude = back(self.extrude)
+        normals = extrude / np.maximum(np.linalg.norm(extrude, axis=1, keepdims=True), 1e-30)
+        return BaseMesh(back(self.positions - m[:3, 3]), normals, self.uvs, self.faces,
+                        back(self.su), back(self.sv), self.base, np.eye(4), extrude)
 
     def bbox(self, scale: float) -> tuple[np.ndarray, np.ndarray]:
         """Bounding box of the displacement volume (min, max), (3,) each."""
@@ -138,15 +151,19 @@ def make_base_mesh(base_name: str, params: dict, filename: str | None, resolutio
             raise ValueError(f"{owner}: base 'mesh' needs a 'filename' (PLY/OBJ with UVs)")
         pos, nrm, uvs, faces = (np.asarray(a, np.float64) for a in load_uv_mesh(filename, owner))
         faces = faces.astype(np.int64)
+        # one direction per position (as `displaced`): the copies of a UV-seam or hard-edge
+        # position extrude together, so the slices close over the seam
+        direction = tessellate.welded_normals(pos, nrm, faces).astype(np.float64)
     else:
         base = surfaces.make_base(base_name, **params)
         nu, nv = tessellate.grid_resolution(base, resolution)
         t = tessellate.displace_parametric(base, None, 0.0, 0.0, nu, nv)
         pos, nrm, uvs = _columns(t.positions), _columns(t.normals), _columns(t.texcoords)
         faces = _columns(t.faces).astype(np.int64)
+        direction = nrm
     m = np.asarray(to_world, np.float64)
     pos = pos @ m[:3, :3].T + m[:3, 3]
-    extrude = nrm @ m[:3, :3].T
+    extrude = direction @ m[:3, :3].T
     nrm = nrm @ np.linalg.inv(m[:3, :3])
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
     if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(nrm)) and np.all(np.isfinite(uvs))):
@@ -158,6 +175,14 @@ def make_base_mesh(base_name: str, params: dict, filename: str | None, resolutio
     faces[inward] = faces[inward][:, ::-1]
     su, sv = vertex_tangents(pos, uvs, faces)
     return BaseMesh(pos, nrm, uvs, faces, su, sv, base, m, extrude)
+
+
+def transform_pair(matrix: np.ndarray) -> tuple[mi.Transform4f, mi.Transform4f]:
+    """(to_world, to_object) Dr.Jit transforms of a (4, 4) object-to-world matrix (the
+    inverse taken in float64)."""
+    m = np.asarray(matrix, np.float64)
+    make = lambda a: mi.Transform4f(mi.ScalarTransform4f(mi.ScalarMatrix4f(a.astype(np.float32))))
+    return make(m), make(np.linalg.inv(m))
 
 
 @dataclass
@@ -314,8 +339,8 @@ def volume_walls(bm: BaseMesh, scale: float) -> SliceMesh:
     """The boundary of the displacement volume, slightly outside the slices: top at
     h = 1 + ε, bottom at h = -ε (wound inwards), quads on the open edges; wall flag 1 and
     outward normals, so a ray enters where it meets a wall's front face."""
-    lo_box, hi_box = bm.bbox(scale)
-    reach = 1 + float(np.max(np.abs(np.concatenate([lo_box, hi_box]))))
+    lo_box, hi_box = bm.bbox(scale)   # the reach of step_past's offset (relative: any size)
+    reach = float(np.linalg.norm(hi_box - lo_box) + np.max(np.abs(np.concatenate([lo_box, hi_box]))))
     eps = max(WALL_EPS, 4 * SPAWN_EPS * reach / bm.world_scale(scale))
     top = SliceMesh(*_vertex_data(bm, scale * (1 + eps), 1.0, 1.0), bm.faces)
     bottom = SliceMesh(*_vertex_data(bm, -scale * eps, 0.0, 1.0, 1.0), bm.faces[:, ::-1])
@@ -357,7 +382,8 @@ class SliceScene:
     interpolated from preliminary intersections (cheaper than Mitsuba's full interaction).
 
     Attributes: scene, mesh; faces (3 x UInt32 per face); uv, ramp, bn, su, sv (per vertex);
-    flags (per face: 1 wall, 2 bottom wall); fn (per-face unit geometric normal).
+    flags (per face: 1 wall, 2 bottom wall); fn (per-face unit geometric normal); length
+    (the bounding-box diagonal [world units], the size the walks' offsets are relative to).
     """
 
     def __init__(self, sm: SliceMesh, name: str):
@@ -376,6 +402,7 @@ class SliceScene:
         fn = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
         self.fn = f32(fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-30))
         self.triangles = len(sm.faces)
+        self.length = float(np.linalg.norm(sm.positions.max(0) - sm.positions.min(0)))
 
     def geometry(self) -> zbuffer.Geometry:
         """The triangles for the z-buffer (:mod:`mi_displace.slicing.rasterised`), built once."""
@@ -415,13 +442,16 @@ def orthogonal_counts(bm: BaseMesh, scale: float, n: int, ratio_scaling: bool) -
     With ``ratio_scaling`` (§3.4) the orthogonal slices get the spacing of the aligned ones
     (scale / n): n x edge length / max displacement per base polygon edge, so edge 2 and
     displacement 0.5 give 4x the slices.  Without it, n slices per base polygon edge.
+    Lengths are measured in object space: ``to_world`` (a non-uniform scale too) moves the
+    slices with the surface but never changes how many there are.
     """
+    obj = bm.in_object_space()
     counts = []
-    for length in bm.extent():
-        if ratio_scaling:
-            c = math.ceil(n * length / bm.world_scale(scale) - 1e-9)
+    for length in obj.extent():
+        if ratio_scaling:   # relative tolerance: float32 matrices give 80.000001 for 80
+            c = math.ceil(n * length / obj.world_scale(scale) * (1 - 1e-6))
         else:
-            c = n * max(1, round(length / bm.mean_edge()))
+            c = n * max(1, round(length / obj.mean_edge()))
         counts.append(int(min(max(c, 1), 1 << 20)))
     return counts[0], counts[1]
 

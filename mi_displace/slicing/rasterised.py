@@ -42,7 +42,7 @@ from mi_displace.slicing.trace import alpha_test
 #: Floats per sample of :attr:`FrameBuffer.packed` (a power of two: one packet gather).
 PACKED = 16
 #: A lane's ray is one of the frame's sample rays when it passes this close to the sample's
-#: ray (relative to 1 + the distance) and points along it within this many grid cells.
+#: ray (relative to the volume's size + the distance) and points along it within this many grid cells.
 ON_RAY_EPS, ON_SAMPLE_CELLS = 1e-4, 1e-2
 
 
@@ -61,6 +61,7 @@ class FrameBuffer:
             undefined where ``found`` is not set), read by one packet gather, (n * 16,)
             Float; :attr:`hit` unpacks it.
         eye: (3,) camera position (perspective) or None (orthographic).
+        length: the volume's size [world units] that :data:`ON_RAY_EPS` is relative to.
     """
 
     view: zbuffer.View
@@ -69,6 +70,7 @@ class FrameBuffer:
     found: mi.Bool
     packed: mi.Float
     eye: np.ndarray | None
+    length: float
 
     @property
     def hit(self) -> Hit:
@@ -92,8 +94,8 @@ class FrameBuffer:
             eye = mi.Point3f(*[float(x) for x in self.eye])
             r = origin - eye
             off = r - dr.dot(r, d) * d
-            on_ray = dr.norm(off) <= ON_RAY_EPS * (1 + dr.norm(r))
-            on_ray &= (dr.dot(r, d) >= -ON_RAY_EPS * (1 + dr.norm(r))) & (dl.z > 0)
+            tol = ON_RAY_EPS * (self.length + dr.norm(r))
+            on_ray = (dr.norm(off) <= tol) & (dr.dot(r, d) >= -tol) & (dl.z > 0)
             q = mi.Point2f(dl.x / dl.z, dl.y / dl.z)
         else:
             ol = local @ origin
@@ -109,7 +111,7 @@ class FrameBuffer:
         use &= dr.gather(mi.Bool, self.covered, index, use)
         found = dr.gather(mi.Bool, self.found, index, use)
         hit = _unpack(dr.gather(mi.ArrayXf, self.packed, index, found, shape=(PACKED, dr.width(index))))
-        use &= ~hit.found | (dr.dot(hit.p - origin, d) >= -ON_RAY_EPS * (1 + dr.norm(hit.p - origin)))
+        use &= ~hit.found | (dr.dot(hit.p - origin, d) >= -ON_RAY_EPS * (self.length + dr.norm(hit.p - origin)))
         return use, hit
 
 
@@ -280,7 +282,8 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
     eye = None
     if view.perspective:
         eye = np.array(sensor.world_transform() @ mi.ScalarPoint3f(0, 0, 0), np.float64).ravel()
-    frame = FrameBuffer(view, aa, covered, dr.zeros(mi.Bool, n), dr.empty(mi.Float, PACKED * n), eye)
+    frame = FrameBuffer(view, aa, covered, dr.zeros(mi.Bool, n), dr.empty(mi.Float, PACKED * n), eye,
+                        walls.length)
     # the base polygons, when drawn: the bottom wall where the ray leaves through it; drawn
     # first, it hides every slice fragment behind it (early depth test) and stays below
     # every slice fragment in front of it (its key keeps the depth, an id of all ones)

@@ -25,16 +25,19 @@ import mitsuba as mi
 #: α-test of §3.1 (``basic``: D >= h_α, zero heights drawn) and §3.2 (``ramp``: D - h_α > 0,
 #: zero heights masked out).
 ALPHA_TESTS = ("basic", "ramp")
-#: Offset [x (1 + max |p|) world units] that moves a walk off the polygon it just met.
-#: Mitsuba's spawn_ray uses ~9e-5, which would skip slices closer than that.
+#: Offset [x (L + max |p|), L the slices' bounding-box diagonal] that moves a walk off the
+#: polygon it just met: relative to the object's size and position, never an absolute
+#: length, so a model in millimetres walks the same slices as one in metres.  Mitsuba's
+#: spawn_ray uses ~9e-5, which would skip slices closer than that.
 SPAWN_EPS = 1e-5
 
 
-def step_past(p: mi.Point3f, n: mi.Vector3f, d: mi.Vector3f) -> mi.Float:
+def step_past(p: mi.Point3f, n: mi.Vector3f, d: mi.Vector3f, length: float) -> mi.Float:
     """Distance along unit ``d`` that leaves the polygon through ``p`` (unit normal ``n``)
-    behind by :data:`SPAWN_EPS` x (1 + max |p|) along its normal.  Walks stay on the ray's
-    line (a normal offset per slice would drift the ray sideways over thousands of slices)."""
-    offset = SPAWN_EPS * (1 + dr.max(dr.abs(p)))
+    behind by :data:`SPAWN_EPS` x (``length`` + max |p|) along its normal (``length``: the
+    slices' size, world units).  Walks stay on the ray's line (a normal offset per slice
+    would drift the ray sideways over thousands of slices)."""
+    offset = SPAWN_EPS * (length + dr.max(dr.abs(p)))
     return offset / dr.maximum(dr.abs(dr.dot(d, n)), 1e-3)
 
 
@@ -96,7 +99,7 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
         b0, b1 = dr.select(passes, bary[0], b0), dr.select(passes, bary[1], b1)
         found |= passes
         going = valid & ~passes & ~leaving & (i + 1 < max_iter)
-        t_acc = dr.select(going, t + step_past(p, fn, d), t_acc)
+        t_acc = dr.select(going, t + step_past(p, fn, d, slices.length), t_acc)
         return i + 1, t_acc, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom
 
     state = (mi.UInt32(0), mi.Float(zero), dr.zeros(mi.Bool, n), mi.Bool(active),

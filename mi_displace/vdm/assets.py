@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from mi_displace.bake.meshdata import _lines
+from mi_displace.core.resources import scene_path
 
 
 def parametric_grid(base_name: str, resolution: int, **params):
@@ -55,7 +56,7 @@ def main() -> None:
     import mi_displace
 
     mi_displace.init()
-    out = Path(__file__).resolve().parents[2] / "scenes" / "parts" / "vdm_corner_normals"
+    out = scene_path("parts", "vdm_corner_normals")
     pos, uv, faces = parametric_grid("torus", 64, major_radius=1.0, minor_radius=0.4)
     print(write_corner_normal_obj(out / "torus.obj", pos, uv, faces))
 

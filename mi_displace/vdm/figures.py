@@ -28,9 +28,9 @@ import gc
 import json
 from pathlib import Path
 
+from mi_displace.core.resources import FIGURES_DIR, scene_path
 
-ROOT = Path(__file__).resolve().parents[2]
-SCENES = {"torus": ROOT / "scenes" / "vdm_torus.xml", "spot": ROOT / "scenes" / "vdm_spot.xml"}
+SCENES = {"torus": scene_path("vdm_torus.xml"), "spot": scene_path("vdm_spot.xml")}
 
 
 def _save_json(path: Path, data) -> None:
@@ -65,8 +65,8 @@ def methods_figure(name: str, out: Path, res: int) -> dict:
     return result
 
 
-UNSEEN = {"grazing": ROOT / "scenes" / "vdm_bricks_grazing.xml",
-          "corners": ROOT / "scenes" / "vdm_corner_normals.xml"}
+UNSEEN = {"grazing": scene_path("vdm_bricks_grazing.xml"),
+          "corners": scene_path("vdm_corner_normals.xml")}
 GRAZING_ANGLES = (45, 70, 82, 85)
 
 
@@ -191,7 +191,7 @@ def main(argv=None) -> int:
     import mi_displace
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default=str(ROOT / "docs" / "figures"))
+    parser.add_argument("--out", default=str(FIGURES_DIR))
     parser.add_argument("--res", type=int, default=256)
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--only", choices=("methods", "sweeps", "unseen"), default=None)

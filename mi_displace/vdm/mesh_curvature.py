@@ -118,6 +118,21 @@ def tile_scale(positions: np.ndarray, uvs: np.ndarray, faces: np.ndarray, tiling
     return mean, spread
 
 
+def open_edge_count(positions: np.ndarray, faces: np.ndarray) -> int:
+    """Edges used by one face only once vertices are welded by position (0: closed).
+
+    Args:
+        positions: (V, 3) vertex positions; copies at UV seams count as one vertex.
+        faces: (F, 3) vertex indices.
+    """
+    _, weld = np.unique(np.asarray(positions, np.float32), axis=0, return_inverse=True)
+    f = weld.reshape(-1)[np.asarray(faces)]
+    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    edges = edges[edges[:, 0] != edges[:, 1]]          # degenerate faces add no edge
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return int(np.count_nonzero(counts == 1))
+
+
 def is_curved(positions: np.ndarray, faces: np.ndarray, tolerance: float = 1e-6) -> bool:
     """True when the faces' normals are not all parallel (the mesh bends somewhere).
 

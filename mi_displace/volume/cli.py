@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+from mi_displace.core.resources import FIGURES_DIR
 
 
 def _cmd_animate(args) -> int:
@@ -42,6 +42,6 @@ def add_commands(sub) -> dict:
     animation_options(p, frames=12)
 
     p = sub.add_parser("volume-figures", help="volume trade-off sweeps (docs/volume.md)")
-    p.add_argument("--out", type=Path, default=ROOT / "docs" / "figures", help="output folder")
+    p.add_argument("--out", type=Path, default=FIGURES_DIR, help="output folder")
     p.add_argument("--quick", action="store_true", help="small images and references")
     return {"volume-animate": _cmd_animate, "volume-figures": _cmd_figures}

@@ -24,9 +24,10 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.core.resources import scenes_dir
 from mi_displace.evaluate import tradeoff as tr
 
-SCENES = Path(__file__).resolve().parents[2] / "scenes"
+SCENES = scenes_dir()
 SWEEPS = [
     ("bits", "volume_nucleon_pull.xml", ["8", "16", "32"]),
     ("dk_res", "volume_nucleon_pull.xml", ["8", "16", "32", "64"]),

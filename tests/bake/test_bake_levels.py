@@ -2,6 +2,8 @@
 import mitsuba as mi
 import numpy as np
 import pytest
+
+import mi_displace
 from conftest import plane
 
 from mi_displace.bake.baker import bake
@@ -71,7 +73,7 @@ def test_restored_auto_levels_and_build_stats(variant_llvm, tmp_path):
                            "s": {"type": "restored", "map": str(tmp_path / "d16.png"), "levels": "auto"}})
     (shape2,) = scene2.shapes()
     assert shape2.build_stats["levels"] == 5 and shape2.build_stats["rule"] == "auto: map (no sensor)"
-    assert shape2.fit_to_scene(scene2)                       # far camera: fewer levels, rebuilt
+    assert mi_displace.fit_to_sensors(scene2) == [shape2.id()]          # far camera: fewer levels, rebuilt
     assert shape2.build_stats["levels"] < 5 and shape2.face_count() == len(lo.faces) * 4 ** shape2.build_stats["levels"]
     with pytest.raises(Exception, match="levels"):
         mi.load_dict({"type": "restored", "map": str(tmp_path / "d16.png"), "levels": "many"})

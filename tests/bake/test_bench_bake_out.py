@@ -1,11 +1,14 @@
 """`mi-displace bench bake` writes where --out says, never into the checkout by default (issue 15
 item 11).  The benchmark's parts are replaced by stubs: this checks where files go, not figures."""
 import json
+from pathlib import Path
 
 import pytest
 
 from mi_displace.bench import bake as bench
 from mi_displace.bench._timing import output_dir
+
+REPO = Path(__file__).resolve().parents[2]   # the checkout
 
 
 @pytest.fixture
@@ -30,11 +33,11 @@ class _Mesh:
 
 
 def test_default_out_is_outside_the_checkout():
-    assert not output_dir("bake").resolve().is_relative_to(bench.REPO.resolve())
+    assert not output_dir("bake").resolve().is_relative_to(REPO.resolve())
 
 
 def test_bench_writes_only_under_out(stubbed, tmp_path, capsys):
-    figures = bench.REPO / "docs" / "figures"
+    figures = REPO / "docs" / "figures"
     before = {p: p.stat().st_mtime_ns for p in figures.iterdir()} if figures.is_dir() else {}
     from mi_displace.cli import main
 

@@ -198,12 +198,12 @@ def test_traverse_edits_redice_only_what_changed(variant):
     params.update()
     r = np.linalg.norm(np.asarray(mi.traverse(shape)["vertex_positions"]).reshape(-1, 3), axis=1)
     assert np.allclose(r, 1, atol=1e-6)
-    # a camera edit reaches the shape through redice (Mitsuba tells only the scene)
+    # a camera edit reaches the shape through fit_to_sensors (Mitsuba tells only the scene)
     params["cam0.to_world"] = mi.ScalarTransform4f().look_at(origin=[0, -12, 0], target=[0, 0, 0], up=[0, 0, 1])
     params.update()
     f4 = shape.face_count()
-    assert dicing.redice(scene) == ["ball"] and shape.face_count() < f4 / 3
-    assert dicing.redice(scene) == []               # nothing changed: nothing rebuilt
+    assert dicing.fit_to_sensors(scene) == ["ball"] and shape.face_count() < f4 / 3
+    assert dicing.fit_to_sensors(scene) == []               # nothing changed: nothing rebuilt
     # the scene's acceleration structure follows: a ray hits the new surface
     ray = mi.Ray3f(mi.Point3f(0, -5, 0), mi.Vector3f(0, 1, 0))
     assert scene.ray_intersect(ray).t[0] == pytest.approx(5 - r[np.argmin(np.abs(
@@ -230,14 +230,14 @@ def test_scale_edit_keeps_the_topology_when_no_rate_moves(variant):
     assert z.max() > 0.15
 
 
-def test_scene_without_sensor_refs_waits_for_redice(variant):
+def test_scene_without_sensor_refs_waits_for_fit_to_sensors(variant):
     with pytest.warns(UserWarning, match="needs a sensor"):
         scene = mi.load_dict({"type": "scene", "cam": camera([0, -3.2, 0]),
                               "ball": {"type": "displaced", "base": "sphere", "dicing_rate": 1.0,
                                        "scale": 0.05, "height": {"type": "ripples"}}})
     shape = scene.shapes()[0]
     coarse = shape.face_count()
-    assert dicing.redice(scene) == [shape.id()]
+    assert dicing.fit_to_sensors(scene) == [shape.id()]
     assert shape.face_count() > 10 * coarse and shape.build_stats["sensors"] == 1
 
 

@@ -74,3 +74,22 @@ def test_when_progress_is_shown(stderr, monkeypatch, tty, env, forced, argument,
     bar = progress.bar(3, "passes", enabled=argument)
     assert bar.disable is (not shown)
     bar.close()
+
+
+def test_stages_are_records_of_the_mi_displace_logger(stderr, caplog):
+    """A script or notebook sees the stages through logging, even when stderr is not a
+    terminal (progress off for the console), and nothing is printed twice."""
+    import logging
+
+    with caplog.at_level(logging.INFO, logger="mi_displace"):
+        with progress.stage("tessellating") as s:
+            s.note = "8 faces"
+        progress.log("point 2/4: map_resolution=32")
+    messages = [r.getMessage() for r in caplog.records if r.name == "mi_displace"]
+    assert messages[0] == "tessellating ..." and re.fullmatch(r"tessellating: \d+\.\d\d s \(8 faces\)", messages[1])
+    assert messages[2] == "point 2/4: map_resolution=32"
+    assert stderr.getvalue() == ""          # progress off: no console line
+    with caplog.at_level(logging.INFO, logger="mi_displace"):
+        with progress.stage("quiet", enabled=False):
+            pass
+    assert not any(r.getMessage().startswith("quiet") for r in caplog.records)

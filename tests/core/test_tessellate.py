@@ -133,6 +133,26 @@ def test_mesh_displacement_welds_uv_seams(variant):
     assert len(np.asarray(t.faces).T) == len(faces) * 16
 
 
+def test_welded_normals_are_angle_weighted_and_face_the_vertex_normals():
+    """A box split into 24 corners with per-face normals, its faces wound at random: every
+    corner's direction is the diagonal (three right angles, whatever the triangulation: an
+    area weight would tilt it), identical for the three copies; an unused vertex takes its
+    own normal."""
+    box = trimesh.creation.box()
+    corners = box.vertices[box.faces].reshape(-1, 3)
+    normals = np.repeat(box.face_normals, 3, 0)
+    faces = np.arange(len(corners)).reshape(-1, 3)
+    flip = np.random.default_rng(0).random(len(faces)) < 0.5
+    faces[flip] = faces[flip][:, ::-1]
+    pos = np.concatenate([corners, [[5.0, 5.0, 5.0]]])
+    nrm = np.concatenate([normals, [[0.0, 1.0, 0.0]]])
+    d = tessellate.welded_normals(pos, nrm, faces)
+    assert d.dtype == np.float32 and d.shape == pos.shape and np.all(np.isfinite(d))
+    assert np.allclose(d[:-1], np.sign(corners) / np.sqrt(3), atol=1e-6)
+    assert np.array_equal(d[-1], [0, 1, 0])
+    assert tessellate.split_positions(nrm, tessellate.weld_classes(pos)) == 8
+
+
 def test_grid_resolution_validation():
     s = surfaces.Sphere(1.0)
     for bad in (0, -3, 2.5):

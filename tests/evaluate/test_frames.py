@@ -4,10 +4,10 @@ import json
 
 import pytest
 
+from mi_displace.core.resources import scene_path
 from mi_displace.evaluate import frames
-from pathlib import Path
 
-SCENE = Path(__file__).resolve().parents[1] / "data" / "tradeoff" / "bumpy_sphere.xml"
+SCENE = scene_path("tradeoff", "bumpy_sphere.xml")
 RASTER = {"mode": "approximation", "integrator": "raster"}
 
 

@@ -9,16 +9,16 @@ cluster must give bit-identical raster images.
 import json
 import math
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import mi_displace
+from mi_displace.core.resources import scene_path
 from mi_displace.evaluate import atlas as atlas_mod
 from mi_displace.evaluate import tradeoff as tr
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "tradeoff"
+DATA = scene_path("tradeoff")
 SCENE = DATA / "bumpy_sphere.xml"
 SWEEP = dict(max_spp=128, warm_repeats=3)
 
@@ -58,6 +58,18 @@ def test_sweep_measures_every_point(sweep):
     for i in range(3):
         assert (out / f"point_{i}.png").is_file()
     assert (out / "tradeoff.png").stat().st_size > 10_000
+
+
+def test_a_progress_line_per_point(sweep, caplog):
+    """Scripts and notebooks see each point through the mi_displace logger."""
+    import logging
+
+    _, root = sweep
+    with caplog.at_level(logging.INFO, logger="mi_displace"):
+        tr.tradeoff(SCENE, [tr.parse_knob("resolution=6,24,96")], out_dir=root / "again",
+                    cache_dir=root / "cache", progress=None, **SWEEP)
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("point ")]
+    assert lines == [f"point {i}/3: resolution={r}: cached" for i, r in ((1, 6), (2, 24), (3, 96))]
 
 
 def test_pareto_front_brute_force(sweep):

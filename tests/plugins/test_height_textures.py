@@ -133,14 +133,15 @@ def test_bad_properties(variant, name, props, match):
     # Mitsuba's loader wraps the plugin's ValueError in a RuntimeError that quotes it.
     with pytest.raises(RuntimeError, match=f"ValueError: {name}: parameter {match}"):
         mi.load_dict({"type": name, **props})
-    # Constructed directly, the ValueError itself propagates.
+    # Read and built directly, the ValueError itself propagates.
     from mi_displace.plugins import bricks, cells, ripples
-    cls = {"ripples": ripples.Ripples, "bricks": bricks.Bricks, "cells": cells.Cells}[name]
+    module = {"ripples": ripples, "bricks": bricks, "cells": cells}[name]
+    cls = getattr(module, name.capitalize())
     p = mi.Properties(name)
     for key, value in props.items():
         p[key] = value
     with pytest.raises(ValueError, match=f"{name}: parameter {match}"):
-        cls(p)
+        cls(p, module.SPEC.read(p))
 
 
 def test_unknown_property_is_rejected(variant):
@@ -210,13 +211,13 @@ def test_bumpmap_check_fails_for_a_gradient_of_the_wrong_sign(variant, name):
     (measured: 43-77 % of the bump effect)."""
     import importlib
 
-    cls = getattr(importlib.import_module(f"mi_displace.plugins.{name}"), name.capitalize())
+    module = importlib.import_module(f"mi_displace.plugins.{name}")
 
-    class Flipped(cls):
+    class Flipped(getattr(module, name.capitalize())):
         def eval_1_grad(self, si, active=True):
             return -super().eval_1_grad(si, active)
 
-    mi.register_texture(f"test_flipped_{name}", lambda props: Flipped(props))
+    mi.register_texture(f"test_flipped_{name}", lambda props: Flipped(props, module.SPEC.read(props)))
     difference, effect = bump_agreement(
         mi.load_dict({"type": f"test_flipped_{name}", **COARSE[name]}))
     assert difference > BUMP_TOLERANCE * effect, (difference, effect)

@@ -100,6 +100,35 @@ def test_spot_light_is_a_cone(variant):
 def test_bad_parameters(variant):
     with pytest.raises(Exception, match="'aa'"):
         scene({"type": "raster", "aa": 0})
+    for bad in (0, "many"):
+        with pytest.raises(Exception, match="'max_layers'"):
+            scene({"type": "raster", "max_layers": bad})
+
+
+def cards(count, opacity=0.0):
+    """``count`` see-through (null) cards between the camera and the sphere."""
+    return {f"card{k}": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate(
+        [0, -4 + 0.2 * k, 1.2 - 0.08 * k]).rotate([1, 0, 0], 90).scale(0.4),
+        "bsdf": {"type": "mask", "opacity": {"type": "rgb", "value": opacity},
+                 "bsdf": {"type": "diffuse"}}} for k in range(count)}
+
+
+@pytest.mark.parametrize("visibility", ["raytrace", "zbuffer"])
+def test_layer_limit_is_sized_from_the_scene(variant, visibility):
+    """Twelve see-through cards (more than the old fixed limit of 8): by default every ray
+    passes all of them and sees the sphere (raster.layer_limit)."""
+    integrator = {"type": "raster", "visibility": visibility}
+    bare = render(scene(integrator))
+    img = render(scene(integrator, extra=cards(12)))
+    behind = np.abs(render(scene(integrator, extra=cards(12, 1.0))) - bare).max(-1) > 1e-2
+    assert behind.mean() > 0.05   # the cards cover part of the sphere
+    assert np.abs(img - bare).max(-1)[behind].max() < 1e-3
+
+
+def test_a_given_layer_limit_warns_naming_max_layers(variant):
+    """A ray cut short by an explicit max_layers is counted and named, never silent."""
+    with pytest.warns(UserWarning, match="max_layers=4"):
+        render(scene({"type": "raster", "max_layers": 4}, extra=cards(12)))
 
 
 def test_grazing_view_and_grazing_light_stay_finite(variant):
@@ -138,7 +167,7 @@ def test_found_interaction_is_the_traced_one(variant):
                                                   "stop": card(0.4, -2.0, 0.9)})
     ray, _, _, _ = raster.pixel_rays(sc.sensors()[0], 1)
     active = mi.Bool(True)
-    si, found = raster.first_opaque_hit(sc, ray, 8, active)
+    si, found, _ = raster.first_opaque_hit(sc, ray, 8, active)
     traced = sc.ray_intersect(found, active)
     for name in ("t", "p", "n", "uv", "dp_du", "dp_dv", "prim_index"):
         assert np.array_equal(np.array(getattr(si, name)), np.array(getattr(traced, name))), name

@@ -194,6 +194,19 @@ def test_mesh_base_equals_parametric_plane(variant, helpers, tmp_path):
         assert flip(a, b)[0] < 0.01, direction
 
 
+def test_mesh_base_slices_close_over_uv_seams(variant, tmp_path):
+    """A UV sphere OBJ with a seam column and per-side loader normals: every copy of a
+    position extrudes by the same vector, so the top of the displacement volume (and every
+    slice between) welds into a closed surface, as the base does."""
+    from tests.plugins.test_displaced_seams import uv_sphere_obj, welded_edges
+
+    bm = geo.make_base_mesh("mesh", {}, uv_sphere_obj(tmp_path / "s.obj"), None, np.eye(4))
+    assert welded_edges(bm.positions, bm.faces) == (0, 0)
+    top = bm.positions + 0.1 * bm.extrude
+    assert np.all(np.isfinite(top))
+    assert welded_edges(top, bm.faces) == (0, 0)
+
+
 @pytest.mark.slow
 def test_torus_is_finite_and_close_to_displaced(variant, helpers):
     sensor = helpers.look([0, -3.6, 2.4], [0, 0, 0], fov=35, res=48)
@@ -286,3 +299,25 @@ def test_traverse_edits_rebuild_the_slices(variant, helpers):
     params["obj.slices"] = 2.5
     with pytest.raises(Exception, match="integer"):
         params.update()
+
+
+@pytest.mark.parametrize("visibility", ["raytrace", "zbuffer"])
+def test_raster_sees_through_stacked_volumes(variant, helpers, visibility):
+    """Five stacked slicing volumes that draw nothing (zero heights, ramp α-test) over a
+    floor: a ray crosses ten volume walls, more than the old fixed limit of 8 layers.  Under
+    `raster` (ambient light: walls cast no shadow) the floor is what the floor alone gives."""
+    def floor_scene(count):
+        shapes = {f"s{k}": {**helpers.plane(height={"type": "uniform", "value": 0.0}, alpha="ramp",
+                                            slices=4, scale=0.05, direction="a", draw_base=False),
+                            "to_world": mi.ScalarTransform4f().translate([0, 0, 0.2 * k])}
+                  for k in range(count)}
+        return mi.load_dict({
+            "type": "scene", "integrator": {"type": "raster", "visibility": visibility}, **shapes,
+            "floor": {"type": "rectangle", "bsdf": helpers.MATERIAL,
+                      "to_world": mi.ScalarTransform4f().translate([0, 0, -0.5]).scale(3)},
+            "amb": {"type": "constant", "radiance": 1.0},
+            "sensor": helpers.look([0.3, -0.5, 4], [0, 0, 0], res=48)})
+    bare = np.array(mi.render(floor_scene(0)))
+    img = np.array(mi.render(floor_scene(5)))
+    assert np.all(np.isfinite(img))
+    assert np.abs(img - bare).max() < 1e-4

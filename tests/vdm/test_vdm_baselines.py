@@ -1,5 +1,6 @@
 """Horizon mapping, relief mapping and the geometry masks against independent truth."""
 import math
+import re
 
 import drjit as dr
 import mitsuba as mi
@@ -89,11 +90,11 @@ def test_baseline_errors_name_their_own_plugin(variant, plugin):
         props = dict({"type": plugin, "height": _constant_texture(0.5), "depth": 0.1}, **bad)
         with pytest.raises(Exception) as caught:
             mi.load_dict(props)
-        assert f"{plugin}: '{name}'" in str(caught.value), str(caught.value)
+        assert re.search(rf"{plugin}: (parameter )?'{name}'", str(caught.value)), str(caught.value)
         assert "vdm:" not in str(caught.value)
 
 
-@pytest.mark.parametrize("bad, bounds", [({"tiling_u": 0}, "[1e-06, inf)"),
+@pytest.mark.parametrize("bad, bounds", [({"tiling_u": 0}, "(0, inf)"),
                                          ({"steps": 5000}, "[1, 4096]")])
 def test_range_errors_print_both_bounds(variant, bad, bounds):
     """An open bound reads as infinity, never as 'None'."""
@@ -101,4 +102,4 @@ def test_range_errors_print_both_bounds(variant, bad, bounds):
     name, value = next(iter(bad.items()))
     with pytest.raises(Exception) as caught:
         mi.load_dict(props)
-    assert f"relief: '{name}' must be finite and in {bounds}, got {value}" in str(caught.value)
+    assert f"relief: parameter '{name}' must lie in {bounds}, got {value}" in str(caught.value)

@@ -97,7 +97,7 @@ def test_plugin_methods_in_a_trace_run_with_the_collector_paused(variant):
 
         def _note(self):
             # only the calls from vdm's methods (Dr.Jit also traces the probe directly)
-            if sys._getframe(2).f_globals.get("__name__") == "mi_displace.plugins.vdm":
+            if sys._getframe(2).f_globals.get("__name__") == "mi_displace.vdm.mesostructure":
                 seen.append(gc.isenabled())
 
         def eval(self, ctx, si, wo, active=True):

@@ -95,9 +95,32 @@ def test_bad_input(variant):
             _render(_scene("volume_slicer", vol, **props))
     with pytest.raises(RuntimeError, match="exactly one of"):
         mi.load_dict({"type": "displaced_volume"})
+    with pytest.raises(RuntimeError, match="displaced_volume: parameter 'to_world' is not supported"):
+        mi.load_dict({"type": "displaced_volume", "procedural": "piggy_bank", "resolution": 16,
+                      "to_world": mi.ScalarTransform4f().translate([1, 0, 0])})
     with pytest.raises(RuntimeError, match="singular"):
         mi.load_dict({"type": "displaced_volume", "procedural": "piggy_bank", "resolution": 16,
                       "map0_type": "wave", "map0_to_world": mi.ScalarTransform4f().scale([1, 0, 1])})
+
+
+@pytest.mark.parametrize("light", ["area", "envmap"])
+def test_lights_the_slicer_cannot_draw_are_refused(variant, light, tmp_path):
+    """An area light or an environment map would leave the slices unlit: refused, naming
+    the emitter and the integrator, before anything renders."""
+    if light == "area":
+        emitter = {"type": "rectangle", "emitter": {"type": "area", "radiance": 5.0}}
+    else:
+        mi.Bitmap(np.full((8, 16, 3), 0.5, dtype=np.float32)).write(str(tmp_path / "env.exr"))
+        emitter = {"type": "envmap", "filename": str(tmp_path / "env.exr")}
+    sc = _scene("volume_slicer", _volume())
+    d = {"type": "scene", "integrator": {"type": "volume_slicer", "volume": _volume(),
+                                         "albedo": 0.8},
+         "sensor": sc.sensors()[0], "odd_light": emitter}
+    sc = mi.load_dict(d)
+    problem = sc.integrator().setup_problem(sc)
+    assert problem.startswith("volume_slicer: cannot draw emitter") and "\n" not in problem
+    with pytest.raises(ValueError, match="volume_slicer: cannot draw emitter"):
+        sc.integrator().render(sc, sc.sensors()[0])
 
 
 def test_traverse_edits_maps_without_rebuilding_the_object(variant):
@@ -140,7 +163,7 @@ def test_fast_paths_agree_with_the_slow_ones(variant, monkeypatch, tilt):
     skipping, the shading branch and the shading's reuse of the density step's lookup change
     no bit against reading the D_k everywhere, twice per visible sample, and marching every
     slice."""
-    from mi_displace.volume import slicing
+    from mi_displace.volume import slicer
 
     m = mi.ScalarTransform4f().translate([0.0, -0.5, 0.0]).rotate([1, 0, 0], tilt).scale([0.5, 0.5, 0.5])
     vol = _volume(maps=[("gaussian", {"amount": 0.6})], map0_to_world=m)
@@ -168,10 +191,10 @@ def test_fast_paths_agree_with_the_slow_ones(variant, monkeypatch, tilt):
         assert np.array_equal(np.array(a), np.array(b))
     assert np.array_equal(np.array(fast.alpha), np.array(slow.alpha))
     everywhere = lambda v, s, lo, hi: (np.array([1, 1, 1]), mi.Float([0.0]))   # one occupied cell
-    monkeypatch.setattr(slicing, "occupancy", everywhere)
-    monkeypatch.setattr(slicing, "REUSE_LOOKUP", False)                # shading reads the D_k again
-    for kw, img in zip(props, images):
-        assert img.max() > 0 and np.array_equal(img, _render(_scene("volume_slicer", vol, **kw))), kw
+    monkeypatch.setattr(slicer, "occupancy", everywhere)
+    for kw, img in zip(props, images):                                  # shading reads the D_k again
+        again = _render(_scene("volume_slicer", vol, reuse_lookup=False, **kw))
+        assert img.max() > 0 and np.array_equal(img, again), kw
 
 def test_volume_methods_in_a_trace_run_with_the_collector_paused(variant, monkeypatch):
     """volpath's medium calls are vectorised: Dr.Jit traces every live medium, holding plain

@@ -37,7 +37,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.render.raster import _is_ambient, _is_delta, pixel_rays
+from mi_displace.render.lights import check as check_emitters, is_constant, is_delta
+from mi_displace.render.raster import pixel_rays
 from mi_displace.volume.displacement import Lookup
 from mi_displace.volume.field import NORMALS, AlbedoField, DisplacedVolume
 
@@ -46,19 +47,19 @@ MODELS = ("scatter", "surface")
 EARLY_STOP = 1e-4
 #: Most slices (refused before rendering).
 MAX_SLICES = 8192
-#: Shade a visible sample with the D_k lookup of its density step (pre-image and read points)
-#: instead of reading the D_k again; False re-reads them (the same image bit for bit, tested).
-REUSE_LOOKUP = True
 
 
 class SliceSettings:
     """Renderer settings (module docstring); ``spacing`` in object voxels; ``albedo`` a
     constant or an :class:`~mi_displace.volume.field.AlbedoField` (then it is also the
-    surface model's reflectance in place of ``color``)."""
+    surface model's reflectance in place of ``color``).  ``reuse_lookup``: shade a visible
+    sample with the D_k lookup of its density step (pre-image and read points) instead of
+    reading the D_k again; False re-reads them (the same image bit for bit, tested; kept as a
+    setting for the A/B of ``scripts/volume_overhead_ab.py``)."""
 
     def __init__(self, model="scatter", normals="jacobian", spacing=1.0, albedo=0.8,
                  color=(0.8, 0.7, 0.55), iso=0.5, sharpness=4.0, shadows=True,
-                 light_resolution=None, aa=1):
+                 light_resolution=None, aa=1, reuse_lookup=True):
         if model not in MODELS:
             raise ValueError(f"model: must be one of {MODELS}, got {model!r}")
         if normals not in NORMALS:
@@ -76,6 +77,7 @@ class SliceSettings:
         self.albedo = 1.0 if self.albedo_field is not None else float(albedo)
         self.color, self.iso, self.sharpness = tuple(float(c) for c in color), float(iso), float(sharpness)
         self.shadows, self.light_resolution, self.aa = bool(shadows), light_resolution, int(aa)
+        self.reuse_lookup = bool(reuse_lookup)
 
 
 def check_slices(vol: DisplacedVolume, s: SliceSettings) -> int:
@@ -219,15 +221,21 @@ def _slice_frame(sensor: mi.Sensor, lo, hi, spacing):
 
 
 def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSettings) -> mi.TensorXf:
-    """Render the displaced volume by slicing; returns a (height, width, 3) linear tensor."""
+    """Render the displaced volume by slicing; returns a (height, width, 3) linear tensor.
+
+    Raises:
+        ValueError: an emitter the slicer does not model (area lights, environment maps),
+            before anything renders.
+    """
+    check_emitters(scene, "volume_slicer")
     vol.prepare()
     if s.albedo_field is not None:
         s.albedo_field.prepare()
     lo, hi = vol.proxy_box()
     spacing = s.spacing * float(vol.obj.voxel_size.min())
     origin, forward, zmin, count = _slice_frame(sensor, lo, hi, spacing)
-    lights = [e for e in scene.emitters() if _is_delta(e)]
-    ambient = [e for e in scene.emitters() if _is_ambient(e)]
+    lights = [e for e in scene.emitters() if is_delta(e)]
+    ambient = [e for e in scene.emitters() if is_constant(e)]
     film = max(sensor.film().crop_size())
     gn, grid = light_grid(vol, s, lights, lo, hi, film) if (s.model == "scatter" or s.shadows) else (0, None)
     ray, weight, w, h = pixel_rays(sensor, s.aa)
@@ -254,7 +262,7 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
     # the density step's D_k lookup (pre-image, read points, α factors) goes on to the
     # shading of the same sample, which then reads no D_k again (only J and ∇α for the normal)
     own_albedo = s.albedo_field is not None and s.albedo_field.volume is vol
-    reuse = REUSE_LOOKUP and vol.mode == "approximation" and (
+    reuse = s.reuse_lookup and vol.mode == "approximation" and (
         (s.model == "surface" and s.normals != "fd") or own_albedo)
 
     def shade(x, r):
@@ -335,7 +343,7 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
     si.wi = -ray.d
     env = mi.Color3f(0.0)
     for e in scene.emitters():
-        if not _is_delta(e):
+        if not is_delta(e):
             env += mi.Color3f(e.eval(si))
     L = (L + T * env) * weight
     n = s.aa * s.aa
