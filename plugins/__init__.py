@@ -35,6 +35,7 @@ PLUGIN_MODULES = [
 VARIANT_MODULES = [
     "mi_displace.vdm.mesostructure",
     "mi_displace.vdm.bsdfs",
+    "mi_displace.slicing.bsdf",
 ]
 
 _registered_for: str | None = None

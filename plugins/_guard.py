@@ -26,7 +26,7 @@ from typing import Callable
 import mitsuba as mi
 
 from mi_displace.core.progress import stage
-from mi_displace.core.properties import PluginSpec
+from mi_displace.core.properties import Param, PluginSpec
 
 _STRING_CONVERSION = re.compile(
     r"^(?:could not convert string to float|invalid literal for int\(\) with base \d+): '(.*)'$", re.S)
@@ -45,22 +45,11 @@ def check_finite_floats(plugin: str, props: mi.Properties) -> None:
             raise ValueError(f"{plugin}: parameter {key!r} must be finite, got {value}")
 
 
-_TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
-
-
 def boolean(plugin: str, props: mi.Properties, name: str, default: bool) -> bool:
-    """Property ``name`` as a bool: a ``<boolean>``, 0 / 1, or a string true/false (yes/no,
-    on/off, 1/0, any case; ``bool("false")`` would be True), else a ``ValueError`` naming
-    ``plugin`` and the property."""
-    value = props.get(name, default)
-    if isinstance(value, bool):
-        return value
-    if isinstance(value, (int, float)) and value in (0, 1):
-        return bool(value)
-    if isinstance(value, str) and value.strip().lower() in _TRUE + _FALSE:
-        return value.strip().lower() in _TRUE
-    raise ValueError(f"{plugin}: parameter {name!r} must be a boolean (true or false), "
-                     f"got {value!r}")
+    """Property ``name`` as a bool (a ``<boolean>``, 0 / 1, or true/false, yes/no, on/off in
+    any case), else a ``ValueError`` naming ``plugin`` and the property: the typed reader's
+    rule (:class:`~mi_displace.core.properties.Param`) for plugins not yet declared."""
+    return Param(name, "bool", default, "").convert(plugin, props.get(name, default))
 
 
 def _named_in_traceback(error: Exception, keys: list[str]) -> str | None:

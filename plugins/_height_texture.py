@@ -28,6 +28,16 @@ from mi_displace.core import heightfield as hf
 from mi_displace.core.collector import collector_paused
 from mi_displace.core.properties import Param
 
+def example(plugin: str) -> str:
+    """The reference's example of a height texture: bump mapping a rectangle with it."""
+    return f"""<shape type="rectangle">
+    <bsdf type="bumpmap">
+        <texture type="{plugin}" name="arbitrary"/>
+        <bsdf type="diffuse"/>
+    </bsdf>
+</shape>"""
+
+
 #: The parameter every height texture has besides its pattern's.
 TO_UV = Param("to_uv", "transform", None, "uv placement (as `bitmap`'s): the upper-left 2×2 "
               "and the translation of a 4×4 or 3×3 transform")

@@ -3,7 +3,7 @@
 import mitsuba as mi
 
 from mi_displace.core.properties import Param, PluginSpec
-from mi_displace.plugins._height_texture import TO_UV, height_texture_base
+from mi_displace.plugins._height_texture import TO_UV, example, height_texture_base
 from mi_displace.plugins._guard import constructor
 
 SPEC = PluginSpec(
@@ -20,12 +20,7 @@ SPEC = PluginSpec(
               low=0, open_low=True, editable=True, differentiable=True),
         TO_UV,
     ),
-    example="""<shape type="rectangle">
-    <bsdf type="bumpmap">
-        <texture type="bricks" name="arbitrary"/>
-        <bsdf type="diffuse"/>
-    </bsdf>
-</shape>""",
+    example=example("bricks"),
     limits="Periodic over the unit square (integer counts), so it tiles across closed surfaces' seams.",
 )
 

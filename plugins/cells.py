@@ -4,7 +4,7 @@ import mitsuba as mi
 
 from mi_displace.core.heightfield import MAX_CELLS
 from mi_displace.core.properties import Param, PluginSpec
-from mi_displace.plugins._height_texture import TO_UV, height_texture_base
+from mi_displace.plugins._height_texture import TO_UV, example, height_texture_base
 from mi_displace.plugins._guard import constructor
 
 SPEC = PluginSpec(
@@ -20,12 +20,7 @@ SPEC = PluginSpec(
         Param("seed", "int", 0, "jitter hash seed", low=0, high=2**31 - 1, editable=True),
         TO_UV,
     ),
-    example="""<shape type="rectangle">
-    <bsdf type="bumpmap">
-        <texture type="cells" name="arbitrary"/>
-        <bsdf type="diffuse"/>
-    </bsdf>
-</shape>""",
+    example=example("cells"),
     limits="Periodic over the unit square, so it tiles across closed surfaces' seams.",
 )
 

@@ -33,6 +33,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.core import surfaces
 from mi_displace.ddm.animation import Animation
 from mi_displace.ddm.model import BASE_PARAMS, DDMConfig, DDMModel
 from mi_displace.plugins._guard import constructor, take_sensors
@@ -72,7 +73,7 @@ def config_from_props(props: mi.Properties) -> DDMConfig:
     if "map_resolution" in props:   # an integer, or the string "auto"
         value = props.get("map_resolution")
         cfg.map_resolution = "auto" if str(value).strip() == "auto" else _int(value, "map_resolution")
-    cfg.base_params = {k: float(props.get(k)) for k in BASE_PARAMS.get(cfg.base, ()) if k in props}
+    cfg.base_params = surfaces.base_params(cfg.base, props, BASE_PARAMS)
     cfg.animation = Animation(**{k: float(props.get(k)) for k in ANIMATION_KEYS if k in props})
     return cfg
 

@@ -20,68 +20,14 @@ from __future__ import annotations
 
 import time
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from mi_displace.core.mesh_io import resolve_path
-from mi_displace.plugins.slicing import SlicingBSDF, _slice_count
+from mi_displace.slicing.bsdf import DepthObjectBSDF, ViewColour, slice_count
 from mi_displace.vdm.mesostructure import nested_objects
 from mi_displace.slicing import depth_object as dobj
-from mi_displace.vdm.frame import shading_interaction
 from mi_displace.plugins._guard import constructor
-
-
-class ViewColour(mi.Texture):
-    """The §4.2 colour at ``si.p`` for the viewer along ``-wi`` (the depth object BSDF puts
-    the found point and the view direction into the interaction it shades)."""
-
-    def __init__(self, obj: dobj.DepthObject):
-        super().__init__(mi.Properties())
-        self.obj = obj
-
-    def _value(self, si):
-        return self.obj.color(si.p, -si.to_world(si.wi))
-
-    def eval(self, si, active=True):
-        return mi.UnpolarizedSpectrum(self._value(si))
-
-    def eval_3(self, si, active=True):
-        return self._value(si)
-
-    def eval_1(self, si, active=True):
-        return dr.mean(self._value(si), axis=0)
-
-    def mean(self):
-        return mi.Float(float(np.mean(self.obj.images.color)))
-
-    def is_spatially_varying(self):
-        return True
-
-    def traverse(self, cb):
-        pass
-
-
-class DepthObjectBSDF(SlicingBSDF):
-    """The depth object seen through its cube (``self.model``: a DepthObject)."""
-
-    PLUGIN = "depth_object"
-
-    def _walk(self, si, active):
-        active = mi.Bool(active)
-        wi = si.to_world(si.wi)
-        origin, d = si.p + wi * si.t, -wi
-        found, p = self.model.find(origin, d, active)
-        normal = self.model.normal(p, d)
-        normal = dr.select(dr.dot(normal, d) > 0, -normal, normal)
-        si2 = shading_interaction(si, si.uv, normal, dr.cross(normal, mi.Vector3f(0.31, 0.53, 0.79)))
-        si2.p = p
-        return (p, normal), active & ~found, si2
-
-    def _lit(self, state, wo_world, active):
-        p, normal = state
-        return ~self.model.occluded(p, normal, wo_world, active & (dr.dot(normal, wo_world) > 0))
-
 
 
 def _cube(center, half):
@@ -101,7 +47,7 @@ class DepthObjectShape(mi.Mesh):
     def __init__(self, props: mi.Properties):
         start = time.perf_counter()
         name = "visual_hull" if self.HULL else "depth_object"
-        slices = _slice_count(props)
+        slices = slice_count(props)
         if slices == "auto":
             raise ValueError(f"{name}: 'slices' must be an integer")
         shapes = nested_objects(props, mi.Shape)

@@ -54,14 +54,6 @@ from mi_displace.core.texture_height import check_texture_finite, height_functio
 from mi_displace.core.thickness import crossing_check, crossing_warning
 from mi_displace.plugins._guard import boolean, constructor, take_sensors
 
-BASE_PARAMS = {
-    "plane": (),
-    "sphere": ("radius",),
-    "cylinder": ("radius", "length"),
-    "torus": ("major_radius", "minor_radius"),
-}
-
-
 def _mesh_level(mesh_data, props, edge_length) -> int:
     """Edge splits per base triangle: ``subdivision`` or from ``edge_length``."""
     if edge_length is not None:
@@ -145,9 +137,7 @@ class Displaced(mi.Mesh):
             if not self.dicing:
                 self._topology = tessellate.subdivision_topology(mesh_data[3], self._weld, grid)
         else:
-            base = surfaces.make_base(
-                base_name, **{k: float(props.get(k)) for k in BASE_PARAMS.get(base_name, ())
-                              if k in props})
+            base = surfaces.make_base(base_name, **surfaces.base_params(base_name, props))
             if "split_normals" in props:
                 raise ValueError(f"displaced: 'split_normals' applies to base 'mesh' only "
                                  f"(base is {base_name!r})")

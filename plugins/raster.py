@@ -1,57 +1,67 @@
-"""``<integrator type="raster">``: the GPU-style renderer of :mod:`mi_displace.render.raster`.
+"""``<integrator type="raster">``: the adapter of :mod:`mi_displace.render.raster`, the
+GPU-style renderer (:data:`SPEC` declares its parameters).
 
-.. code-block:: xml
-
-    <integrator type="raster">
-        <integer name="aa" value="1"/>          <!-- aa x aa fixed samples per pixel -->
-        <integer name="max_layers" value="8"/>  <!-- alpha-test pass-throughs; default: sized from the scene -->
-        <string name="visibility" value="raytrace"/>   <!-- raytrace|zbuffer -->
-        <string name="shadows" value="ray"/>           <!-- ray|map|none -->
-        <integer name="shadow_resolution" value="2048"/>  <!-- shadow-map texels per side -->
-        <float name="shadow_bias" value="0.5"/>        <!-- shadow-map depth bias, texels -->
-        <float name="shadow_normal_offset" value="0.5"/> <!-- lookup offset x sin(theta), texels -->
-        <integer name="area_samples" value="16"/>      <!-- fixed points per area light -->
-        <integer name="area_shadow_resolution" value="256"/>  <!-- per point, shadows="map" -->
-    </integrator>
-
-``mi.render(scene)`` returns a (height, width, 3) image; ``spp`` and ``seed`` are ignored
-(the result is deterministic).  ``integrator.shapes`` (a list of meshes, default ``None``:
-the scene's) lets a scene without shapes be drawn by z-buffer and shadow maps, with no
-acceleration structure built (``docs/raster.md``).  An emitter it cannot draw is a
-``ValueError`` naming it when the frame starts, before any kernel, and when
-``mi_displace.render.scene.load`` loads the scene (``setup_problem(scene)``).
+``integrator.shapes`` (a list of meshes, default ``None``: the scene's) lets a scene without
+shapes be drawn by z-buffer and shadow maps, with no acceleration structure built
+(``docs/raster.md``).
 """
 import mitsuba as mi
 
-from mi_displace.render import lights, raster
 from mi_displace.core.collector import collector_paused
+from mi_displace.core.properties import Param, PluginSpec
+from mi_displace.render import lights, raster
 from mi_displace.plugins._guard import constructor
+
+_DEFAULTS = raster.Options()
+
+SPEC = PluginSpec(
+    "raster", "integrator",
+    "GPU-style rendering, deterministic: one sample per pixel centre (or a fixed aa × aa "
+    "pattern), the first surface that passes the alpha test (null BSDFs: slicing, VDM "
+    "silhouettes), shaded once per light — point, spot and directional lights with hard "
+    "shadows, area lights as fixed point sets, `constant`/`envmap` as unoccluded ambient.  "
+    "Any other emitter is refused by name before a kernel runs.  `mi.render` returns a "
+    "(height, width, 3) image; `spp` and `seed` are ignored.",
+    (
+        Param("aa", "int", 1, "aa × aa fixed samples per pixel", low=1, high=64),
+        Param("max_layers", "int", None, "alpha-test pass-throughs per ray (default: sized "
+              "from the scene, never cuts a ray short)", low=1),
+        Param("visibility", "string", _DEFAULTS.visibility, "ray-traced or z-buffered primary "
+              "visibility", choices=raster.VISIBILITY),
+        Param("shadows", "string", _DEFAULTS.shadows, "shadow rays, shadow maps or none",
+              choices=raster.SHADOWS),
+        Param("shadow_resolution", "int", _DEFAULTS.shadow_resolution, "shadow-map texels per side",
+              low=1, high=16384),
+        Param("shadow_bias", "float", _DEFAULTS.shadow_bias, "shadow-map depth bias", unit="texels", low=0),
+        Param("shadow_normal_offset", "float", _DEFAULTS.shadow_normal_offset,
+              "shadow-map lookup offset × sin(theta)", unit="texels", low=0),
+        Param("area_samples", "int", _DEFAULTS.area_samples, "fixed light points per area emitter "
+              "(the quality knob of area lights)", low=1, high=lights.MAX_AREA_SAMPLES),
+        Param("area_shadow_resolution", "int", _DEFAULTS.area_shadow_resolution, "cube shadow-map "
+              "texels per side of each area-light point (shadows=map)", low=1, high=16384),
+    ),
+    example="""<integrator type="raster">
+    <string name="shadows" value="ray"/>
+    <integer name="area_samples" value="4"/>
+</integrator>
+<shape type="sphere"><bsdf type="diffuse"/></shape>
+<emitter type="point"><point name="position" x="2" y="-2" z="3"/></emitter>""",
+    stats="none (the frame is drawn at render time)",
+    limits="One bounce: no indirect light beyond the ambient term; area lights are point sets "
+           "(banding at few samples, a 1/d² peak for receivers touching the light).",
+)
 
 
 class Raster(mi.SamplingIntegrator):
     """One sample per pixel (or aa x aa); delta lights with hard shadows, area lights as
     fixed point sets, constant/envmap ambient."""
 
-    def __init__(self, props: mi.Properties):
+    def __init__(self, props: mi.Properties, values: dict):
         super().__init__(props)
-        self.aa = int(props.get("aa", 1))
+        self.aa = values.pop("aa")
         #: None: raster.layer_limit of the scene (no ray is cut short)
-        self.max_layers = props.get("max_layers", None)
-        if self.aa < 1:
-            raise ValueError(f"raster: 'aa' must be a positive integer, got {self.aa}")
-        if self.max_layers is not None and not (isinstance(self.max_layers, int) and self.max_layers >= 1):
-            raise ValueError(f"raster: 'max_layers' must be an integer >= 1, got {self.max_layers!r}")
-        defaults = raster.Options()
-        self.options = raster.Options(
-            visibility=str(props.get("visibility", defaults.visibility)),
-            shadows=str(props.get("shadows", defaults.shadows)),
-            shadow_resolution=int(props.get("shadow_resolution", defaults.shadow_resolution)),
-            shadow_bias=float(props.get("shadow_bias", defaults.shadow_bias)),
-            shadow_normal_offset=float(props.get("shadow_normal_offset", defaults.shadow_normal_offset)),
-            area_samples=int(props.get("area_samples", defaults.area_samples)),
-            area_shadow_resolution=int(props.get("area_shadow_resolution",
-                                                 defaults.area_shadow_resolution)),
-        ).check()
+        self.max_layers = values.pop("max_layers")
+        self.options = raster.Options(**values).check()
         self.shapes = None
 
     @collector_paused   # the whole frame: its vectorised calls trace every live BSDF
@@ -79,4 +89,4 @@ class Raster(mi.SamplingIntegrator):
 
 
 def register():
-    mi.register_integrator("raster", constructor("raster", Raster))
+    mi.register_integrator("raster", constructor(SPEC, Raster))

@@ -4,7 +4,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mi_displace.core.properties import Param, PluginSpec
-from mi_displace.plugins._height_texture import TO_UV, height_texture_base
+from mi_displace.plugins._height_texture import TO_UV, example, height_texture_base
 from mi_displace.plugins._guard import constructor
 
 SPEC = PluginSpec(
@@ -21,12 +21,7 @@ SPEC = PluginSpec(
         Param("phase", "float", 0.0, "phase along u", unit="rad", editable=True, differentiable=True),
         TO_UV,
     ),
-    example="""<shape type="rectangle">
-    <bsdf type="bumpmap">
-        <texture type="ripples" name="arbitrary"/>
-        <bsdf type="diffuse"/>
-    </bsdf>
-</shape>""",
+    example=example("ripples"),
     limits="Periodic over the unit square for integer frequencies.",
 )
 

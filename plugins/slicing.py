@@ -37,92 +37,16 @@ from __future__ import annotations
 import math
 import time
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.core import surfaces
 from mi_displace.core.texture_height import check_texture_finite, warn_if_srgb
-from mi_displace.plugins.displaced import BASE_PARAMS
-from mi_displace.vdm.mesostructure import MesostructureBSDF, nested_objects, read_shared
+from mi_displace.slicing.bsdf import SlicingBSDF, slice_count
+from mi_displace.vdm.mesostructure import nested_objects
 from mi_displace.slicing import geometry as geo
 from mi_displace.slicing.sliced import DIRECTIONS, SlicedVolume
-from mi_displace.vdm.frame import shading_interaction
 from mi_displace.plugins._guard import boolean, constructor
-
-
-class SlicingBSDF(MesostructureBSDF):
-    """The α-tested slices of a :class:`SlicedVolume` seen through the volume's walls.
-
-    Subclasses implement ``_walk(si, active)`` (the ``_prepare`` of MesostructureBSDF,
-    computed once per interaction) and ``_lit``."""
-
-    PLUGIN = "slicing"
-    HAS_SILHOUETTE = True
-
-    def __init__(self, props: mi.Properties, model):
-        super().__init__(props, read_shared(props, self.PLUGIN))
-        self.model = model   # a SlicedVolume (or a DepthObject in the subclass)
-        self.self_shadows = bool(props.get("self_shadows", True))
-        self._cache = None
-
-    def _facing(self, w):
-        # the proxy is the volume's boundary: the fragment's own normal decides (nested BSDF)
-        return dr.full(mi.Bool, True, dr.width(w))
-
-    def _prepare(self, si, active):
-        # Mitsuba asks eval, eval_null_transmission and eval_diffuse_reflectance of the same
-        # interaction in one kernel: walk the slices once per interaction (all valid lanes,
-        # so a later call's mask is always covered); the cache keeps si's variables alive,
-        # so their JIT indices cannot be reused by another interaction.  Each vectorised
-        # call gets its own copies of si: the walk is shared by queries made in one
-        # dispatch (the raster integrator's shading asks eval and eval_diffuse_reflectance so,
-        # raster.shade_hit).
-        key = (si.t.index, si.p.x.index, si.wi.x.index)
-        if self._cache is not None and self._cache[0] == key:
-            return self._cache[2]
-        result = self._walk(si, si.is_valid())
-        self._cache = (key, (si.t, si.p, si.wi), result)
-        return result
-
-    def _walk(self, si, active):
-        active = mi.Bool(active)
-        wi = si.to_world(si.wi)
-        origin, d = si.p + wi * si.t, -wi   # the ray's own origin: a camera inside works too
-        third = dr.full(mi.Float, 1 / 3, dr.width(si.t))   # the proxy face's centre (faces
-        bn, su, sv = self.model.walls_scene.frame(si.prim_index, (third, third), active)  # = walls)
-        choice = self.model.choose(d, dr.normalize(bn), su, sv)
-        hit = self.model.find_view(origin, d, choice, active)
-        normal = self.model.normal(hit)
-        si2 = shading_interaction(si, hit.uv, normal, hit.su)
-        si2.p = hit.p
-        return (hit, normal), active & ~hit.found, si2
-
-    def _lit(self, state, wo_world, active):
-        hit, normal = state
-        if not self.self_shadows:
-            return dr.full(mi.Bool, True, dr.width(wo_world))
-        return ~self.model.occluded(hit, normal, wo_world,
-                                    active & hit.found & (dr.dot(normal, wo_world) > 0))
-
-    def to_string(self):
-        return f"{type(self).__name__}[{self.model.stats}]"
-
-
-def _slice_count(props: mi.Properties):
-    """``slices``: a positive integer or ``"auto"``."""
-    value = props.get("slices", 25)
-    if isinstance(value, str):
-        if value.strip().lower() == "auto":
-            return "auto"
-        try:
-            value = float(value)
-        except ValueError:
-            raise ValueError(f"slicing: 'slices' must be an integer or 'auto', got {value!r}") from None
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value == int(value)
-            and 1 <= value <= geo.MAX_SLICES):
-        raise ValueError(f"slicing: 'slices' must be an integer in [1, {geo.MAX_SLICES}] or "
-                         f"'auto', got {value!r}")
-    return int(value)
 
 
 class Slicing(mi.Mesh):
@@ -139,7 +63,7 @@ class Slicing(mi.Mesh):
         scale = float(props.get("scale", 0.1))
         if not (math.isfinite(scale) and scale > 0):
             raise ValueError(f"slicing: 'scale' must be a positive number, got {scale}")
-        slices = _slice_count(props)
+        slices = slice_count(props)
         direction = str(props.get("direction", "best"))
         if direction not in DIRECTIONS:
             raise ValueError(f"slicing: 'direction' must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
@@ -152,7 +76,7 @@ class Slicing(mi.Mesh):
             raise ValueError("slicing: slices='auto' needs the scene's camera: "
                              "<ref name=\"sensor\" id=\"...\"/> (declared before this shape)")
         resolution = props.get("resolution", 1 if base_name == "plane" else 64)
-        params = {k: float(props.get(k)) for k in BASE_PARAMS.get(base_name, ()) if k in props}
+        params = surfaces.base_params(base_name, props)
         to_world = np.array(props.get("to_world", mi.ScalarTransform4f()).matrix, np.float64)
         filename = props.get("filename", None) if base_name == "mesh" else None
         bm = geo.make_base_mesh(base_name, params, filename, resolution, to_world)

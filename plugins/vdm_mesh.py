@@ -36,7 +36,6 @@ import numpy as np
 
 from mi_displace.core import surfaces, tessellate
 from mi_displace.core.mesh_io import load_uv_mesh
-from mi_displace.plugins.displaced import BASE_PARAMS
 from mi_displace.vdm import mesh_curvature
 from mi_displace.plugins._guard import constructor
 from mi_displace.vdm.steps import FACE_FORMS
@@ -53,8 +52,7 @@ def base_geometry(props: mi.Properties):
     if "filename" in props:
         return load_uv_mesh(props.get("filename"), "vdm_mesh")
     name = props.get("base", "sphere")
-    base = surfaces.make_base(name, **{k: float(props.get(k)) for k in BASE_PARAMS.get(name, ())
-                                       if k in props})
+    base = surfaces.make_base(name, **surfaces.base_params(name, props))
     nu, nv = tessellate.grid_resolution(base, props.get("resolution", 64), props.get("edge_length", None))
     t = tessellate.displace_parametric(base, None, 0.0, 0.0, nu, nv)
     return (_columns(t.positions), _columns(t.normals), _columns(t.texcoords), _columns(t.faces))

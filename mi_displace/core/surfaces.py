@@ -259,6 +259,18 @@ class Torus(BaseSurface):
 BASES = {"plane": Plane, "sphere": Sphere, "cylinder": Cylinder, "torus": Torus}
 
 
+#: The float parameters of each parametric base, as plugins name them.
+BASE_PARAMS = {"plane": (), "sphere": ("radius",), "cylinder": ("radius", "length"),
+               "torus": ("major_radius", "minor_radius")}
+
+
+def base_params(name: str, props, extra: dict | None = None) -> dict:
+    """The parameters of base ``name`` that a plugin's ``props`` (``mi.Properties``) give,
+    as floats; ``extra`` adds bases of a plugin's own (``ddm``'s ``teapot``)."""
+    names = {**BASE_PARAMS, **(extra or {})}.get(name, ())
+    return {k: float(props.get(k)) for k in names if k in props}
+
+
 def make_base(name: str, **params) -> BaseSurface:
     """Construct a parametric base by name; ValueError for unknown names or parameters."""
     if name not in BASES:

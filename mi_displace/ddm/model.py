@@ -23,8 +23,8 @@ from mi_displace.ddm import base_maps, charts, footprint, mapping
 from mi_displace.ddm.layout import make_layout
 from mi_displace.ddm.tiles import Tile, get_tile
 
-BASE_PARAMS = {"plane": (), "sphere": ("radius",), "cylinder": ("radius", "length"),
-               "torus": ("major_radius", "minor_radius"), "teapot": ()}
+#: ddm's bases: the parametric ones and the Utah teapot body (no parameters)
+BASE_PARAMS = {**surfaces.BASE_PARAMS, "teapot": ()}
 
 
 def _sign(x: float) -> float:

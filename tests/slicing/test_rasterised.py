@@ -267,7 +267,7 @@ def test_one_slice_walk_for_the_shading(variant, helpers, monkeypatch):
     """Under ``raster`` the shading asks the slicing BSDF's queries (eval per light, the
     ambient albedo) in one dispatch (raster.shade_hit), so the slices are walked once for
     the shading (they were walked once per query)."""
-    from mi_displace.plugins.slicing import SlicingBSDF
+    from mi_displace.slicing.bsdf import SlicingBSDF
     from mi_displace.render import raster
 
     counts = {"shading": False, "walks": 0, "shade_hit": 0}
