@@ -65,6 +65,7 @@ class Sizes(NamedTuple):
 
 FULL = Sizes(RES, SIZE, REPEATS, 96, 256)
 QUICK = Sizes(64, 128, 2, 32, 16)
+
 #: Paper's Table 2 maps: (primitive, resolution); our D_k needs >= 2 nodes per axis.
 TABLE2 = [("peel", (128, 128, 2), 320), ("slabs", (128, 128, 2), 320),
           ("gaussian", (32, 32, 32), 640), ("seam", (64, 64, 64), 5120)]
