@@ -9,8 +9,9 @@
   ``<!-- showcase -->`` under the packaged scene folder (or ``--scenes``), writes
   ``DIR/<scene>/...`` and ``DIR/summary.md`` and prints the summary table.  ``--quick``
   caps the reference at :data:`QUICK_MAX_SPP` samples per pixel.
-* ``bench NAME [--json]`` runs ``mi_displace.bench.NAME.main(json=True/False)`` (JSON or
-  plain-text report on stdout).
+* ``bench NAME [--json] [--quick] [--out DIR]`` runs ``mi_displace.bench.NAME.main(json=...,
+  quick=..., out=...)`` (JSON or plain-text report on stdout; ``--quick``: small sizes, the
+  same code paths, seconds instead of minutes, for checking that a benchmark runs).
 * technique commands: every module in :data:`COMMAND_MODULES` defines
   ``add_commands(sub) -> dict[str, Callable[[argparse.Namespace], int]]``, which adds its
   sub-parsers to ``sub`` and returns the handler of each command name it added.
@@ -160,6 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="run a benchmark module mi_displace.bench.NAME")
     p.add_argument("name", help="benchmark name")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.add_argument("--quick", action="store_true",
+                   help="small sizes, same code paths (checks that it runs; numbers not comparable)")
     p.add_argument("--out", default=None,
                    help="folder for the benchmark's figures (benchmarks that write files; "
                         "default: a folder in the system's temporary directory)")
@@ -303,12 +306,14 @@ def _cmd_showcase(args) -> int:
 
 
 def bench_names() -> list[str]:
-    """Modules available under ``mi_displace.bench``."""
+    """Benchmark modules under ``mi_displace.bench`` (not its private helpers, not the
+    ``peers`` subpackage)."""
     try:
         package = importlib.import_module("mi_displace.bench")
     except ModuleNotFoundError:
         return []
-    return sorted(m.name for m in pkgutil.iter_modules(package.__path__) if not m.name.startswith("_"))
+    return sorted(m.name for m in pkgutil.iter_modules(package.__path__)
+                  if not m.name.startswith("_") and not m.ispkg)
 
 
 def _cmd_bench(args) -> int:
@@ -316,7 +321,7 @@ def _cmd_bench(args) -> int:
     if args.name not in available:
         raise UsageError(f"unknown benchmark {args.name!r}; available: {', '.join(available) or 'none'}")
     module = importlib.import_module(f"mi_displace.bench.{args.name}")
-    kwargs = {}
+    kwargs = {"quick": True} if args.quick else {}
     if args.out is not None:
         if "out" not in inspect.signature(module.main).parameters:
             raise UsageError(f"benchmark {args.name!r} writes no files; it takes no --out")

@@ -1,9 +1,12 @@
-"""Helpers shared by the benchmark scripts: warm median times and the record's printout."""
+"""Helpers shared by the benchmark scripts: warm median times, the record's printout and
+the folder a benchmark writes its figures to."""
 from __future__ import annotations
 
 import json
 import statistics
+import tempfile
 import time
+from pathlib import Path
 
 import drjit as dr
 
@@ -31,3 +34,12 @@ def print_record(record: dict, as_json: bool, width: int = 24) -> None:
     for key, value in record.items():
         for row in value if isinstance(value, list) else [value]:
             print(f"{key:>{width}}: {row:.4g}" if isinstance(row, float) else f"{key:>{width}}: {row}")
+
+
+def output_dir(bench: str, out=None) -> Path:
+    """The folder benchmark ``bench`` writes its files to, created: ``out`` when given, else
+    ``mi_displace_bench/<bench>`` in the system's temporary directory (never the checkout,
+    whose ``docs/figures`` a run refreshes only when named: ``--out docs/figures``)."""
+    folder = Path(out) if out is not None else Path(tempfile.gettempdir()) / "mi_displace_bench" / bench
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder

@@ -29,7 +29,10 @@ fast-simplification and unwrapped with xatlas (preparation, not timed).
   second shows whether a new resolution compiles new kernels (``bake_cold_start.json``).
 
 Only the timing table and the cold start hold the shared timing lock
-(``/tmp/mi_displace_timing.lock``).
+(``/tmp/mi_displace_timing.lock``), and only in a full run.  ``--quick`` runs every part
+with :data:`QUICK` sizes (64^2 timing table, cold start at 128^2 / 256^2 with an empty
+kernel cache only, everything else at 64^2 to 128^2, 2,500 mesh-distance samples), without
+the lock.
 
 Every figure is written as JSON (and the plot as PNG) under ``--out`` (default: a folder
 ``mi_displace_bench/bake`` in the system's temporary directory, never inside the checkout);
@@ -38,6 +41,7 @@ the documentation's figures are refreshed only by naming them: ``mi-displace ben
 """
 from __future__ import annotations
 
+import contextlib
 import json as _json
 import os
 import statistics
@@ -46,17 +50,56 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import drjit as dr
 import numpy as np
 
+from mi_displace.bench._timing import output_dir
 from mi_displace.core.resources import data_path
 
-DEFAULT_OUT = Path(tempfile.gettempdir()) / "mi_displace_bench" / "bake"
 HIGH = data_path("bunny", "stanford-bunny.obj")
 LOW_FACES = 4857
 SPOT = data_path("spot", "spot_triangulated.obj")
 SPOT_CAGE = data_path("spot", "spot_control_mesh.obj")
+
+
+class Sizes(NamedTuple):
+    """Map sides (texels) of each part: the timing table's ``table`` (aa 1 and 2; the naive
+    baker where res x aa <= ``naive_max``), the cold start's ``cold`` pair (first and new
+    resolution), ``multistep``, ``spot``, the restoration ``sweep``, and ``compression``
+    (the first also gives the record's meshdiff and compression ratio); ``headline``: the
+    table row of ``bake_time_warm_s``; ``timing_lock``: hold the shared timing lock;
+    ``cold_cases``: the cold start's (label, empty kernel cache) cases; ``samples``: points
+    per direction of the restoration errors (twice that for the meshdiff and Spot's);
+    ``spot_faces``: Spot's simplified low-polys (faces), beside its control cage."""
+    table: tuple
+    naive_max: int
+    headline: int
+    cold: tuple
+    multistep: int
+    spot: int
+    sweep: tuple
+    compression: tuple
+    timing_lock: bool
+    cold_cases: tuple
+    samples: int
+    spot_faces: tuple
+
+
+COLD_CASES = (("kernel_cache_on_disk", False), ("empty_kernel_cache", True))
+FULL = Sizes((512, 1024, 2048, 4096), 2048, 2048, (1024, 2048), 512, 1024,
+             (256, 512, 1024, 2048), (1024, 512), True, COLD_CASES, 50_000, (1000, 2000))
+QUICK = Sizes((64,), 128, 64, (128, 256), 64, 128, (64,), (128,), False, COLD_CASES[1:],
+              2_500, (1000,))
+
+
+def _distance(a, b, samples: int) -> dict:
+    """:func:`mi_displace.evaluate.metrics.mesh_distance` of two meshes with ``positions``
+    and ``faces`` (``a``: the reference)."""
+    from mi_displace.evaluate.metrics import mesh_distance
+
+    return mesh_distance((a.positions, a.faces), (b.positions, b.faces), samples=samples)
 
 
 def _pair():
@@ -88,18 +131,18 @@ def _median(fn, repeats: int) -> float:
     return statistics.median(fn() for _ in range(repeats))
 
 
-def timing_table(high, low, max_distance, delta) -> list[dict]:
+def timing_table(high, low, max_distance, delta, sizes: Sizes = FULL) -> list[dict]:
     from mi_displace.bake.naive import naive_bake
 
     rows = []
     bake_warm(high, low, 256, 1, max_distance, delta)  # cold: JIT compilation
     bake_warm(high, low, 256, 2, max_distance, delta)
-    for res in (512, 1024, 2048, 4096):
+    for res in sizes.table:
         for aa in (1, 2):
             reps = 3 if res * aa <= 2048 else 1
             ours = _median(lambda: bake_warm(high, low, res, aa, max_distance, delta), reps)
             naive = None
-            if res * aa <= 2048:
+            if res * aa <= sizes.naive_max:
                 start = time.perf_counter()
                 naive_bake(high, low, res, max_distance, delta, aa)
                 naive = time.perf_counter() - start
@@ -120,7 +163,8 @@ dist, _ = default_max_distance(high, low)
 delta = DEFAULT_DELTA_REL * high.diagonal
 dr.set_flag(dr.JitFlag.KernelHistory, True)
 rows = []
-for res in (1024, 1024, 2048, 2048):
+first, new = int(sys.argv[1]), int(sys.argv[2])
+for res in (first, first, new, new):
     dr.kernel_history_clear()
     seconds = bake_warm(high, low, res, 1, dist, delta)
     jit = [k for k in dr.kernel_history([dr.KernelType.JIT])]
@@ -131,19 +175,19 @@ print(json.dumps(rows))
 """
 
 
-def cold_start() -> dict:
-    """First vs later bakes in fresh processes (see the module docstring); seconds."""
+def cold_start(sizes: Sizes = FULL) -> dict:
+    """First vs later bakes in fresh processes (see the module docstring; :data:`FULL`:
+    1024^2 then 2048^2); seconds.  The field names keep the full run's sizes."""
+    script = [sys.executable, "-c", _COLD_SCRIPT, *map(str, sizes.cold)]
     out = {}
-    for label, empty in (("kernel_cache_on_disk", False), ("empty_kernel_cache", True)):
+    for label, empty in sizes.cold_cases:
         with tempfile.TemporaryDirectory() as home:
             env = dict(os.environ)
             if empty:
                 env["HOME"] = home          # Dr.Jit keeps its kernel cache in ~/.drjit
             else:   # fill the cache first, so the measured process finds every kernel on disk
-                subprocess.run([sys.executable, "-c", _COLD_SCRIPT], env=env, check=True,
-                               capture_output=True)
-            run = subprocess.run([sys.executable, "-c", _COLD_SCRIPT], env=env, check=True,
-                                 capture_output=True, text=True)
+                subprocess.run(script, env=env, check=True, capture_output=True)
+            run = subprocess.run(script, env=env, check=True, capture_output=True, text=True)
         r = _json.loads(run.stdout.strip().splitlines()[-1])
         out[label] = {"first_1024_s": r[0]["s"], "warm_1024_s": r[1]["s"],
                       "cold_ratio_1024": r[0]["s"] / r[1]["s"],
@@ -155,24 +199,23 @@ def cold_start() -> dict:
     return out
 
 
-def restoration_and_compression(high, low) -> tuple[dict, list[dict]]:
+def restoration_and_compression(high, low, sizes: Sizes = FULL) -> tuple[dict, list[dict]]:
     from mi_displace.bake import compression
     from mi_displace.bake.baker import bake
     from mi_displace.bake.restore import restore
-    from mi_displace.evaluate.metrics import mesh_distance
 
     original = compression.mesh_bytes(high, with_uvs=False)
     low_b = compression.mesh_bytes(low, with_uvs=True)
     rows, meshdiff = [], None
-    for res in (1024, 512):
+    for res in sizes.compression:
         with tempfile.TemporaryDirectory() as tmp:
             result = bake(high, low, res=res, out_dir=tmp, map_formats=["d16"])
-            if res == 1024:
+            if res == sizes.compression[0]:
                 restored = restore(Path(tmp) / "low.obj", Path(tmp) / "d16.png", levels=2)
-                diff = mesh_distance((high.positions, high.faces), (restored.positions, restored.faces))
-                low_only = mesh_distance((high.positions, high.faces), (low.positions, low.faces))
+                diff = _distance(high, restored, 2 * sizes.samples)
+                low_only = _distance(high, low, 2 * sizes.samples)
                 meshdiff = {"a": "data/bunny/stanford-bunny.obj",
-                            "b": "restored (1024^2 d16.png, levels 2)",
+                            "b": f"restored ({res}^2 d16.png, levels 2)",
                             "restored_faces": int(len(restored.faces)), "restore_s": restored.seconds,
                             **diff, "low_poly_only": {k: low_only[k] for k in ("rms_rel", "hausdorff_rel")}}
         mask_b = compression.mask_bytes(result.maps["valid"])
@@ -181,7 +224,7 @@ def restoration_and_compression(high, low) -> tuple[dict, list[dict]]:
             size, decoded = compression.encode_map(result.maps["displacement"], codec,
                                                    jpeg2k_level=level or 60.0)
             r = restore(low, {"displacement": decoded, "valid": result.maps["valid"]}, levels=2)
-            d = mesh_distance((high.positions, high.faces), (r.positions, r.faces), samples=50_000)
+            d = _distance(high, r, sizes.samples)
             total = low_b + size + mask_b
             rows.append({"res": res, "codec": codec, "jpeg2k_psnr_db": level, "map_bytes": size,
                          "low_bytes": low_b, "mask_bytes": mask_b, "original_bytes": original,
@@ -190,34 +233,32 @@ def restoration_and_compression(high, low) -> tuple[dict, list[dict]]:
     return meshdiff, rows
 
 
-def restoration_sweep(high, low) -> list[dict]:
+def restoration_sweep(high, low, sizes: Sizes = FULL) -> list[dict]:
     """Restoration error against map resolution and subdivision levels (16-bit maps)."""
     from mi_displace.bake.baker import bake
     from mi_displace.bake.restore import restore
-    from mi_displace.evaluate.metrics import mesh_distance
-
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for res in (256, 512, 1024, 2048):
+        for res in sizes.sweep:
             bake(high, low, res=res, out_dir=tmp, map_formats=["d16"])
             for levels in (1, 2, 3):
                 r = restore(Path(tmp) / "low.obj", Path(tmp) / "d16.png", levels=levels)
-                d = mesh_distance((high.positions, high.faces), (r.positions, r.faces), samples=50_000)
+                d = _distance(high, r, sizes.samples)
                 rows.append({"res": res, "levels": levels, "faces": int(len(r.faces)),
                              "restore_s": r.seconds, "hausdorff_rel": d["hausdorff_rel"],
                              "rms_rel": d["rms_rel"]})
     return rows
 
 
-def spot_pairs(res: int = 1024) -> list[dict]:
+def spot_pairs(sizes: Sizes = FULL) -> list[dict]:
     """Spot over its simplified low-polys and over its control cage (see the docstring)."""
     from mi_displace.bake.baker import bake
     from mi_displace.bake.meshdata import load_mesh
     from mi_displace.bake.restore import restore
-    from mi_displace.evaluate.metrics import mesh_distance
 
     high = load_mesh(SPOT, "high-poly")
-    pairs = [(f"simplified to {n:,} faces", None, n) for n in (1000, 2000)]
+    res = sizes.spot
+    pairs = [(f"simplified to {n:,} faces", None, n) for n in sizes.spot_faces]
     pairs.append(("control cage (Catmull-Clark)", load_mesh(SPOT_CAGE, "low-poly"), 0))
     rows = []
     for label, low, faces in pairs:
@@ -228,26 +269,26 @@ def spot_pairs(res: int = 1024) -> list[dict]:
             seconds = time.perf_counter() - start
             low_used = result.low
             counts = result.record["counts"]
-            low_only = mesh_distance((high.positions, high.faces), (low_used.positions, low_used.faces))
+            low_only = _distance(high, low_used, 2 * sizes.samples)
             row = {"low": label, "low_faces": int(len(low_used.faces)), "res": res,
                    "bake_call_s": seconds, "ambiguous_fraction": counts["ambiguous"] / counts["covered"],
                    "low_only": {k: low_only[k] for k in ("rms_rel", "hausdorff_rel")}, "levels": []}
             for levels in (1, 2, 3):
                 r = restore(Path(tmp) / "low.obj", Path(tmp) / "d16.png", levels=levels)
-                d = mesh_distance((high.positions, high.faces), (r.positions, r.faces))
+                d = _distance(high, r, 2 * sizes.samples)
                 row["levels"].append({"levels": levels, "faces": int(len(r.faces)),
                                       "rms_rel": d["rms_rel"], "hausdorff_rel": d["hausdorff_rel"]})
             rows.append(row)
     return rows
 
 
-def multistep_example(res: int = 512) -> dict:
+def multistep_example(sizes: Sizes = FULL) -> dict:
     """One map vs two maps on the leaning-horn sphere (see the module docstring)."""
     from mi_displace.bake.baker import bake
     from mi_displace.bake.multistep import leaning_horn_sphere, multistep_bake, multistep_restore
     from mi_displace.bake.restore import restore
-    from mi_displace.evaluate.metrics import mesh_distance
 
+    res = sizes.multistep
     high = leaning_horn_sphere(256, 128, height=0.6, width=0.2, tilt_deg=80)
     inter = leaning_horn_sphere(128, 64, height=0.6, width=0.2, tilt_deg=40)
     high.uvs = inter.uvs = None
@@ -261,8 +302,7 @@ def multistep_example(res: int = 512) -> dict:
         r2 = multistep_restore(Path(tmp) / "two" / "stage1" / "low.obj",
                                Path(tmp) / "two" / "stage1" / "float.exr",
                                Path(tmp) / "two" / "stage2" / "float.exr", 2, 1)
-    d1 = mesh_distance((high.positions, high.faces), (r1.positions, r1.faces), samples=50_000)
-    d2 = mesh_distance((high.positions, high.faces), (r2.positions, r2.faces), samples=50_000)
+    d1, d2 = _distance(high, r1, sizes.samples), _distance(high, r2, sizes.samples)
     return {"res": res, "one_step": {"faces": int(len(r1.faces)), "ambiguous_texels": one.record["counts"]["ambiguous"],
                                      "hausdorff_high_to_restored": d1["hausdorff_ab"],
                                      "hausdorff_rel": d1["hausdorff_rel"], "rms_rel": d1["rms_rel"]},
@@ -289,35 +329,36 @@ class _TimingLock:
         self.f.close()
 
 
-def run(out=None) -> dict:
+def run(out=None, sizes: Sizes = FULL) -> dict:
+    """Every part at ``sizes``; JSON and the plot are written under ``out``."""
     from mi_displace.bake.baker import DEFAULT_DELTA_REL, default_max_distance
 
-    out = Path(out) if out is not None else DEFAULT_OUT
+    out = output_dir("bake", out)
     high, low = _pair()
     max_distance, _ = default_max_distance(high, low)
     delta = DEFAULT_DELTA_REL * high.diagonal
-    with _TimingLock():
-        table = timing_table(high, low, max_distance, delta)
-        cold = cold_start()
-    multistep = multistep_example()
-    spot = spot_pairs()
-    sweep = restoration_sweep(high, low)
-    meshdiff, comp = restoration_and_compression(high, low)
-    row2048 = next(r for r in table if r["res"] == 2048 and r["aa"] == 1)
-    png16 = next(r for r in comp if r["codec"] == "png16" and r["res"] == 1024)
+    with _TimingLock() if sizes.timing_lock else contextlib.nullcontext():
+        table = timing_table(high, low, max_distance, delta, sizes)
+        cold = cold_start(sizes)
+    multistep = multistep_example(sizes)
+    spot = spot_pairs(sizes)
+    sweep = restoration_sweep(high, low, sizes)
+    meshdiff, comp = restoration_and_compression(high, low, sizes)
+    headline = next(r for r in table if r["res"] == sizes.headline and r["aa"] == 1)
+    png16 = next(r for r in comp if r["codec"] == "png16" and r["res"] == sizes.compression[0])
     record = {
         "high_faces": int(len(high.faces)), "low_faces": int(len(low.faces)),
-        "bake_time_warm_s": row2048["ours_s"], "naive_time_s": row2048["naive_s"],
-        "speedup_vs_naive": row2048["speedup"],
+        "bake_time_warm_s": headline["ours_s"], "naive_time_s": headline["naive_s"],
+        "speedup_vs_naive": headline["speedup"],
         "restore_hausdorff_rel": meshdiff["hausdorff_rel"], "restore_rms_rel": meshdiff["rms_rel"],
         "compression_ratio": png16["ratio"],
-        "compression_ratio_best": max(r["ratio"] for r in comp if r["hausdorff_rel"] <= 0.005),
+        "compression_ratio_best": max((r["ratio"] for r in comp if r["hausdorff_rel"] <= 0.005),
+                                      default=None),
         "timing_table": table, "compression": comp, "meshdiff": meshdiff, "multistep": multistep,
         "restoration_sweep": sweep, "spot": spot, "cold_start": cold,
         "search_distance": max_distance,
         "targets": {"bake_time_warm_s": 1.5, "speedup_vs_naive": 3.0, "restore_hausdorff_rel": 0.005},
     }
-    out.mkdir(parents=True, exist_ok=True)
     for name, value in (("bake_meshdiff", meshdiff), ("bake_compression", comp),
                         ("bake_multistep", multistep), ("bake_bench", record),
                         ("bake_restore_error", sweep), ("bake_spot", spot), ("bake_cold_start", cold)):
@@ -364,9 +405,10 @@ def _plot(table, comp, sweep, out: Path) -> None:
     plt.close(fig)
 
 
-def main(json: bool = False, out=None) -> int:
-    """Run everything; figures go to ``out`` (default :data:`DEFAULT_OUT`, outside the repo)."""
-    record = run(out)
+def main(json: bool = False, quick: bool = False, out=None) -> int:
+    """Run everything (:data:`QUICK` sizes with ``quick``); figures go to ``out`` (default:
+    :func:`~mi_displace.bench._timing.output_dir`, outside the repository)."""
+    record = run(out, QUICK if quick else FULL)
     if json:
         print(_json.dumps(record, indent=2))
     else:

@@ -1,15 +1,15 @@
 """`mi-displace bench bake_blender`: our baker against Blender's Cycles bake (optional).
 
-Needs a Python with ``bpy`` (Blender as a module, ``pip install bpy``, about 375 MB; Blender
-5.0 wants Python 3.11), named by ``$MI_DISPLACE_BLENDER_PYTHON`` (default ``python3``).  Not
-part of the test suite.
+Blender runs in a Python with ``bpy`` (:mod:`mi_displace.bench.peers.blender`, named by
+``$MI_DISPLACE_BLENDER_PYTHON``); without one, each pair records our bake alone and
+``blender_reason`` ("peer unavailable: ...").
 
 Pairs (meshes of our own choosing): **Spot** (``data/spot``, 5,856 faces) loop-subdivided
 twice and displaced along its normals by a procedural relief, and the **Stanford bunny** scan
 (69,451 faces, holes at the bottom).  Each low-poly is made by ``bake()`` itself (Taubin
 smoothing, fast-simplification, xatlas UVs) and written to ``low.obj``; Blender imports that
 file (same UVs, same vertex normals) and the high-poly, and bakes with the same search
-distance (:mod:`mi_displace.bench._blender_side`).
+distance (:mod:`mi_displace.bench.peers.blender_side`).
 
 Compared per texel where both bakers measured the high-poly:
 
@@ -23,35 +23,34 @@ Compared per texel where both bakers measured the high-poly:
 * time: our ``bake()`` (acceleration + all maps at once + padding, warm and first call)
   against the sum of Blender's normal (tangent, object) and position bakes.
 
-Writes ``bake_blender.json`` under ``--out`` (default outside the checkout).
+Writes ``bake_blender.json`` under ``--out`` (default outside the checkout).  ``--quick``:
+Spot subdivided once alone, 128^2 texels, a 1,000-face low-poly.
 """
 from __future__ import annotations
 
 import json as _json
-import os
-import subprocess
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
+from mi_displace.bench._timing import output_dir
 from mi_displace.core.resources import data_path
 
-DEFAULT_OUT = Path(tempfile.gettempdir()) / "mi_displace_bench" / "bake_blender"
 SPOT = data_path("spot", "spot_triangulated.obj")
 BUNNY = data_path("bunny", "stanford-bunny.obj")
 
 
-def spot_displaced():
-    """Spot, loop-subdivided twice (93,696 faces), displaced along its welded normals by
-    0.4 % of the diagonal x sin sin sin at 8 periods per diagonal."""
+def spot_displaced(iterations: int = 2):
+    """Spot, loop-subdivided ``iterations`` times (twice: 93,696 faces), displaced along its
+    welded normals by 0.4 % of the diagonal x sin sin sin at 8 periods per diagonal."""
     import trimesh
 
     from mi_displace.bake.meshdata import MeshData, load_mesh, vertex_normals
 
     spot = load_mesh(SPOT, "spot")
-    v, f = trimesh.remesh.subdivide_loop(spot.positions.astype(np.float64), spot.faces, iterations=2)
+    v, f = trimesh.remesh.subdivide_loop(spot.positions.astype(np.float64), spot.faces,
+                                        iterations=iterations)
     n = vertex_normals(v.astype(np.float32), f)
     k = 2 * np.pi * 8 / spot.diagonal
     h = 0.004 * spot.diagonal * np.sin(k * v[:, 0]) * np.sin(k * v[:, 1]) * np.sin(k * v[:, 2])
@@ -68,11 +67,12 @@ def _stats(x) -> dict:
     return {"median": float(np.median(x)), "p99": float(np.percentile(x, 99)), "max": float(x.max())}
 
 
-def compare_pair(high, res: int, out: Path, blender_python: str, target_faces: int) -> dict:
+def compare_pair(high, res: int, out: Path, target_faces: int) -> dict:
     from mi_displace.bake.baker import bake
     from mi_displace.bake.meshdata import load_mesh, save_obj
     from mi_displace.bake.mikktspace import decode_tangent_map
     from mi_displace.bake.trace import AMBIGUOUS, OK
+    from mi_displace.bench.peers import blender, measure
 
     out.mkdir(parents=True, exist_ok=True)
     save_obj(out / "high.obj", high.positions, high.faces)
@@ -84,14 +84,18 @@ def compare_pair(high, res: int, out: Path, blender_python: str, target_faces: i
     r = bake(out / "high.obj", out / "ours" / "low.obj", res=res, map_formats=["float"],
              max_distance=first.record["settings"]["max_distance"])
     dist = r.record["settings"]["max_distance"]
-    subprocess.run([blender_python, str(Path(__file__).with_name("_blender_side.py")),
-                    str(out / "high.obj"), str(out / "ours" / "low.obj"), str(res), repr(dist),
-                    str(out)], check=True, capture_output=True)
-    b = {name: np.load(out / f"{name}.npy") for name in
-         ("normal_tangent", "normal_object", "position_high", "position_low", "normal_low")}
-    btime = _json.loads((out / "blender.json").read_text())
     low = load_mesh(out / "ours" / "low.obj", "low-poly")
     ours_hit = (r.status == OK) | (r.status == AMBIGUOUS)
+    ours_bake = r.record["timings"]["bake_s"]
+    pair = {"high_faces": int(len(high.faces)), "low_faces": int(len(low.faces)), "res": res,
+            "search_distance": dist, "search_distance_rel": dist / high.diagonal,
+            "ours_measured": int(ours_hit.sum()), "ours_covered": int(r.covered.sum()),
+            "ours_bake_s": ours_bake, "ours_first_call_s": first_call,
+            "ours_warm_call_s": r.record["timings"]["total_s"]}
+    cycles, reason = measure(blender.bake, out / "high.obj", out / "ours" / "low.obj", res, dist, out)
+    if cycles is None:
+        return {**pair, "blender_reason": reason}
+    b = cycles["maps"]
     # Cycles clears what it does not bake to (0, 0, 0); no unit normal encodes as 0
     b_cov = np.any(b["normal_low"][..., :3] != 0, axis=-1)
     b_hit = b_cov & np.any(b["normal_object"][..., :3] != 0, axis=-1)
@@ -112,15 +116,13 @@ def compare_pair(high, res: int, out: Path, blender_python: str, target_faces: i
     n_low = n_low / np.maximum(np.linalg.norm(n_low, axis=-1, keepdims=True), 1e-12)
     d_b = ((b["position_high"][..., :3] - b["position_low"][..., :3]) * n_low).sum(-1)
     dh = np.abs(r.maps["displacement"][both] - d_b[both]) / diag * 100
-    ours_bake = r.record["timings"]["bake_s"]
-    blender_s = sum(btime["seconds"][k] for k in ("normal_tangent", "normal_object", "position_high"))
+    blender_s = sum(cycles["seconds"][k] for k in ("normal_tangent", "normal_object", "position_high"))
     return {
-        "high_faces": int(len(high.faces)), "low_faces": int(len(low.faces)), "res": res,
-        "search_distance": dist, "search_distance_rel": dist / diag, "blender": btime["version"],
-        "coverage": {"ours_measured": int(ours_hit.sum()), "blender_measured": int(b_hit.sum()),
+        **pair, "blender": cycles["version"],
+        "coverage": {"blender_measured": int(b_hit.sum()),
                      "both": int(both.sum()), "only_ours": int((ours_hit & ~b_hit).sum()),
                      "only_blender": int((b_hit & ~ours_hit).sum()),
-                     "blender_covered": int(b_cov.sum()), "ours_covered": int(r.covered.sum())},
+                     "blender_covered": int(b_cov.sum())},
         "normal_object_angle_deg": {**_stats(ang_obj), "over_1deg": int((ang_obj > 1).sum()),
                                     "over_5deg": int((ang_obj > 5).sum())},
         "normal_tangent_angle_deg": {**_stats(ang_tan), "over_1deg": int((ang_tan > 1).sum()),
@@ -130,32 +132,30 @@ def compare_pair(high, res: int, out: Path, blender_python: str, target_faces: i
                                         "blender": int((err_b > 1).sum()), "blender_texels": int(m_b.sum()),
                                         "blender_max_deg": float(err_b.max())},
         "height_abs_diff_pct_diag": {**_stats(dh), "over_0.1pct": int((dh > 0.1).sum())},
-        "time": {"ours_bake_s": ours_bake, "ours_first_call_s": first_call,
-                 "ours_warm_call_s": r.record["timings"]["total_s"],
-                 "blender_normal_tangent_object_position_s": blender_s,
-                 "blender_each_s": btime["seconds"], "ratio_ours_bake_over_blender": ours_bake / blender_s},
+        "time": {"blender_normal_tangent_object_position_s": blender_s,
+                 "blender_each_s": cycles["seconds"], "ratio_ours_bake_over_blender": ours_bake / blender_s},
     }
 
 
-def run(out=None, res: int = 1024) -> dict:
+def run(out=None, quick: bool = False) -> dict:
+    """Both pairs at 1024^2 (``quick``: Spot subdivided once alone, 128^2, 1,000 low-poly
+    faces); the
+    record, also written to ``out/bake_blender.json``."""
     from mi_displace.bake.meshdata import load_mesh
 
-    out = Path(out) if out is not None else DEFAULT_OUT
-    blender_python = os.environ.get("MI_DISPLACE_BLENDER_PYTHON", "python3")
-    check = subprocess.run([blender_python, "-c", "import bpy"], capture_output=True)
-    if check.returncode != 0:
-        raise ValueError(f"MI_DISPLACE_BLENDER_PYTHON: {blender_python!r} cannot import bpy; "
-                         "python3.11 -m venv /tmp/bpy && /tmp/bpy/bin/pip install bpy, then "
-                         "MI_DISPLACE_BLENDER_PYTHON=/tmp/bpy/bin/python")
-    record = {"spot_displaced": compare_pair(spot_displaced(), res, out / "spot", blender_python, 3000),
-              "bunny": compare_pair(load_mesh(BUNNY, "bunny"), res, out / "bunny", blender_python, 5000)}
+    out = output_dir("bake_blender", out)
+    if quick:
+        record = {"spot_displaced": compare_pair(spot_displaced(1), 128, out / "spot", 1000)}
+    else:
+        record = {"spot_displaced": compare_pair(spot_displaced(), 1024, out / "spot", 3000),
+                  "bunny": compare_pair(load_mesh(BUNNY, "bunny"), 1024, out / "bunny", 5000)}
     (out / "bake_blender.json").write_text(_json.dumps(record, indent=2))
     record["out"] = str(out)
     return record
 
 
-def main(json: bool = False, out=None) -> int:
-    record = run(out)
+def main(json: bool = False, quick: bool = False, out=None) -> int:
+    record = run(out, quick)
     print(_json.dumps(record, indent=2) if json else
           "\n".join(f"{k}: {v}" for k, v in record.items()))
     return 0

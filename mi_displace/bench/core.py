@@ -6,15 +6,31 @@
 * ``raster_512_1m_s``: the ``raster`` integrator at 512 x 512 on a ~1M-triangle scene with
   two delta lights, warm median, beside ``path_1spp_512_1m_s`` (Mitsuba's ``path``,
   max_depth 2, 1 spp) on the same scene in the same process.
+
+``--quick`` runs the same with :data:`QUICK` sizes (the spheres at resolution 200 and 100,
+128^2); the field names keep the full run's sizes.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from mi_displace.bench._timing import median_time, print_record
+
+
+class Sizes(NamedTuple):
+    """The tessellated sphere's ``resolution`` (``big``: the ~4M-triangle one; ``small``:
+    the ~1M-triangle scene) and the film's ``res`` x ``res`` pixels."""
+    big: int
+    small: int
+    res: int
+
+
+FULL = Sizes(2000, 1000, 512)
+QUICK = Sizes(200, 100, 128)
 
 
 def _sphere(nu: int) -> dict:
@@ -43,13 +59,13 @@ def _render(scene: mi.Scene, **kw) -> None:
     dr.sync_thread()
 
 
-def run() -> dict:
+def run(sizes: Sizes = FULL) -> dict:
     """Measure everything; returns the JSON record (seconds, counts)."""
     shape_4m = None
 
     def tessellate():
         nonlocal shape_4m
-        shape_4m = mi.load_dict(_sphere(2000))
+        shape_4m = mi.load_dict(_sphere(sizes.big))
         dr.sync_thread()
 
     tess = median_time(tessellate, 3)
@@ -61,9 +77,9 @@ def run() -> dict:
         return scene
 
     accel_s = median_time(accel, 3)
-    shape_1m = mi.load_dict(_sphere(1000))
-    raster_scene = _scene(shape_1m, {"type": "raster"})
-    path_scene = _scene(shape_1m, {"type": "path", "max_depth": 2})
+    shape_1m = mi.load_dict(_sphere(sizes.small))
+    raster_scene = _scene(shape_1m, {"type": "raster"}, sizes.res)
+    path_scene = _scene(shape_1m, {"type": "path", "max_depth": 2}, sizes.res)
     raster_s = median_time(lambda: _render(raster_scene), repeats=5)
     path_s = median_time(lambda: _render(path_scene, spp=1), repeats=5)
     img = np.asarray(mi.render(raster_scene))
@@ -83,7 +99,8 @@ def run() -> dict:
     }
 
 
-def main(json: bool = False) -> dict:
-    record = run()
+def main(json: bool = False, quick: bool = False) -> dict:
+    """Run the benchmark (:data:`QUICK` sizes with ``quick``) and print its record."""
+    record = run(QUICK if quick else FULL)
     print_record(record, json)
     return record

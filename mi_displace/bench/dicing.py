@@ -19,7 +19,12 @@
    uniform resolution of the sweep whose FLIP is no larger (``uniform_faces``), with both
    build times measured in this process, and ``cycles_faces`` = 821760 (quoted).
 
-Writes ``docs/figures/dicing_bench.json`` and ``docs/figures/dicing_flip_vs_faces.png``.
+``--quick`` runs every part with :data:`QUICK` sizes (64^2 films, 4 spp, two uniform
+resolutions and two rates per scene): the same code paths in seconds, numbers not comparable.
+
+Writes ``dicing_bench.json`` and ``dicing_flip_vs_faces.png`` under ``--out`` (default: a
+folder ``mi_displace_bench/dicing`` in the system's temporary directory); the documentation's
+figures are refreshed by naming them: ``mi-displace bench dicing --out docs/figures``.
 """
 from __future__ import annotations
 
@@ -28,24 +33,40 @@ import json as _json
 import math
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
 
-from mi_displace.bench._timing import print_record
-from mi_displace.core.resources import FIGURES_DIR, scene_path
+from mi_displace.bench._timing import output_dir, print_record
+from mi_displace.core.resources import scene_path
 from mi_displace.evaluate import metrics
 from mi_displace.render import scene as scenes
 
 CYCLES_FACES = 821_760       # Cycles' count for its 5,120-triangle sphere (issue 13, quoted)
-SPP = 32
-SWEEPS = {  # scene -> (extra -D parameters, uniform resolutions)
-    "displaced_sphere": ({}, [128, 256, 512, 1024, 2048]),
-    "bump_vs_displaced": ({"mode": "reference"}, [128, 256, 512, 1024, 2048]),
-    "displaced_horizon": ({"mode": "uniform"}, [256, 512, 1024, 2048]),
+SWEEPS = {  # scene -> extra -D parameters
+    "displaced_sphere": {}, "bump_vs_displaced": {"mode": "reference"},
+    "displaced_horizon": {"mode": "uniform"},
 }
-RATES = [0.5, 1.0, 2.0, 4.0]
 REFERENCE_RATE = 0.5
+
+
+class Sizes(NamedTuple):
+    """What a run renders: ``spp`` per render, films of ``res`` x ``res`` pixels, the Cycles
+    sphere's uniform reference at ``cycles_reference`` cells per side, dicing ``rates`` (px)
+    and each sweep scene's uniform ``resolutions`` (cells per side)."""
+    spp: int
+    res: int
+    cycles_reference: int
+    rates: tuple
+    resolutions: dict
+
+
+FULL = Sizes(32, 256, 4096, (0.5, 1.0, 2.0, 4.0),
+             {"displaced_sphere": (128, 256, 512, 1024, 2048),
+              "bump_vs_displaced": (128, 256, 512, 1024, 2048),
+              "displaced_horizon": (256, 512, 1024, 2048)})
+QUICK = Sizes(4, 64, 512, (1.0, 4.0), {name: (32, 128) for name in SWEEPS})
 
 
 def _solid_sines_texture():
@@ -82,15 +103,15 @@ def _solid_sines_texture():
     mi.register_texture("solid_sines", lambda props: SolidSines(props))
 
 
-def _cycles_scene(shape: dict) -> dict:
+def _cycles_scene(shape: dict, sizes: Sizes) -> dict:
     return {
         "type": "scene", "integrator": {"type": "path", "max_depth": 2},
         "camera": {"type": "perspective", "fov": math.degrees(2 * math.atan(18 / 50)),
                    "to_world": mi.ScalarTransform4f().look_at(origin=[0, -3.2, 0], target=[0, 0, 0],
                                                               up=[0, 0, 1]),
-                   "film": {"type": "hdrfilm", "width": 256, "height": 256,
+                   "film": {"type": "hdrfilm", "width": sizes.res, "height": sizes.res,
                             "rfilter": {"type": "box"}},
-                   "sampler": {"type": "independent", "sample_count": SPP}},
+                   "sampler": {"type": "independent", "sample_count": sizes.spp}},
         "key": {"type": "point", "position": [3, -3, 3], "intensity": {"type": "rgb", "value": 30}},
         "ambient": {"type": "constant", "radiance": {"type": "rgb", "value": 0.05}},
         "ball": {"type": "displaced", "base": "sphere", "scale": 0.05, "midlevel": 0.0,
@@ -109,14 +130,14 @@ def _timed_load(loader) -> tuple[mi.Scene, float]:
     return scene, time.perf_counter() - start
 
 
-def _measure(loader, reference=None, seeds=(0,)) -> dict:
-    """Load (timed), render ``seeds``; FLIP of seed 0 against ``reference`` if given."""
+def _measure(loader, spp: int, reference=None, seeds=(0,)) -> dict:
+    """Load (timed), render ``seeds`` at ``spp``; FLIP of seed 0 against ``reference`` if given."""
     scene, build_s = _timed_load(loader)
     shape = next(s for s in scene.shapes() if hasattr(s, "build_stats"))
     stats = dict(shape.build_stats)
     images = []
     for seed in seeds:
-        img, render_s = scenes.render(scene, spp=SPP, seed=seed)
+        img, render_s = scenes.render(scene, spp=spp, seed=seed)
         metrics.assert_finite(img, "dicing bench image")
         images.append(img)
     del scene, shape
@@ -129,43 +150,45 @@ def _measure(loader, reference=None, seeds=(0,)) -> dict:
     return row, images
 
 
-def cycles_sphere() -> dict:
+def cycles_sphere(sizes: Sizes) -> dict:
     """Part 1 (see the module docstring)."""
     _solid_sines_texture()
-    ref_loader = lambda: mi.load_dict(_cycles_scene({"resolution": 4096}))
-    fine, (ref0, ref1) = _measure(ref_loader, seeds=(0, 1))
+    ref_loader = lambda: mi.load_dict(_cycles_scene({"resolution": sizes.cycles_reference}, sizes))
+    fine, (ref0, ref1) = _measure(ref_loader, sizes.spp, seeds=(0, 1))
     noise = metrics.flip(ref0, ref1)[0]
     ours, _ = _measure(lambda: mi.load_dict(_cycles_scene(
-        {"dicing_rate": 1.0, "cam": {"type": "ref", "id": "camera"}})), reference=ref0)
+        {"dicing_rate": 1.0, "cam": {"type": "ref", "id": "camera"}}, sizes)), sizes.spp,
+        reference=ref0)
     return {"cycles_faces": CYCLES_FACES, "faces": ours["faces"], "bytes": ours["bytes"],
             "tessellate_s": ours["tessellate_s"], "build_s": ours["build_s"],
             "flip_vs_uniform_4x": ours["flip"], "noise_floor_flip": noise,
             "uniform_4x_faces": fine["faces"], "uniform_4x_build_s": fine["build_s"],
-            "spp": SPP}
+            "spp": sizes.spp}
 
 
-def sweep(name: str) -> dict:
+def sweep(name: str, sizes: Sizes) -> dict:
     """Part 2 for one scene."""
     path = scene_path(f"{name}.xml")
-    extra, resolutions = SWEEPS[name]
-    dicing_params = ({"mode": "approximation"} if name == "displaced_horizon"
+    extra = {**SWEEPS[name], "res": sizes.res}
+    dicing_params = ({"mode": "approximation", "res": sizes.res} if name == "displaced_horizon"
                      else {**extra, "tessellation": "dicing"})
 
     def load(**params):
         return lambda: scenes.load(path, **{**dicing_params, **params})[0]
 
-    ref, (ref0, ref1) = _measure(lambda: scenes.load(path, mode="reference",
-                                                     reference_rate=REFERENCE_RATE)[0]
-                                 if name == "displaced_horizon" else
-                                 _with_offscreen(path, dicing_params, REFERENCE_RATE), seeds=(0, 1))
+    if name == "displaced_horizon":
+        reference = load(mode="reference", reference_rate=REFERENCE_RATE)
+    else:
+        reference = _with_offscreen(path, dicing_params, REFERENCE_RATE)
+    ref, (ref0, ref1) = _measure(reference, sizes.spp, seeds=(0, 1))
     out = {"reference": {**ref, "dicing_rate": REFERENCE_RATE, "offscreen_dicing_scale": 1},
            "noise_floor_flip": metrics.flip(ref0, ref1)[0], "uniform": [], "dicing": []}
-    for rate in RATES:
-        row, _ = _measure(load(dicing_rate=rate), reference=ref0)
+    for rate in sizes.rates:
+        row, _ = _measure(load(dicing_rate=rate), sizes.spp, reference=ref0)
         out["dicing"].append({"dicing_rate": rate, **row})
-    for res in resolutions:
+    for res in sizes.resolutions[name]:
         row, _ = _measure(lambda: scenes.load(path, **{**extra, "resolution": res})[0],
-                          reference=ref0)
+                          sizes.spp, reference=ref0)
         out["uniform"].append({"resolution": res, **row})
     return out
 
@@ -233,22 +256,22 @@ def plot(sweeps: dict, path: Path) -> None:
     fig.savefig(path, dpi=120)
 
 
-def run() -> dict:
-    cycles = cycles_sphere()
-    sweeps = {name: sweep(name) for name in SWEEPS}
+def run(sizes: Sizes = FULL) -> dict:
+    cycles = cycles_sphere(sizes)
+    sweeps = {name: sweep(name, sizes) for name in SWEEPS}
     return {"summary": summary(cycles, sweeps), "cycles_sphere": cycles, "sweeps": sweeps,
-            "spp": SPP, "variant": mi.variant()}
+            "spp": sizes.spp, "res": sizes.res, "variant": mi.variant()}
 
 
-def main(json: bool = False, replot: bool = False) -> int:
-    """Run the benchmark (or, with ``replot``, redraw the figure from the saved JSON)."""
-    figures = FIGURES_DIR
+def main(json: bool = False, quick: bool = False, out=None, replot: bool = False) -> int:
+    """Run the benchmark (:data:`QUICK` sizes with ``quick``) and write its JSON and figure
+    under ``out``; with ``replot``, only redraw the figure from the JSON saved there."""
+    figures = output_dir("dicing", out)
     if replot:
         result = _json.loads((figures / "dicing_bench.json").read_text())
         plot(result["sweeps"], figures / "dicing_flip_vs_faces.png")
         return 0
-    result = run()
-    figures.mkdir(parents=True, exist_ok=True)
+    result = run(QUICK if quick else FULL)
     (figures / "dicing_bench.json").write_text(_json.dumps(result, indent=2))
     plot(result["sweeps"], figures / "dicing_flip_vs_faces.png")
     print_record(result["summary"], json, width=0)

@@ -29,8 +29,13 @@
    64^2 images, 8 spp, 40 Adam steps, ``prb_projective``: ``recovery_rms`` = height RMS /
    range after the last step.
 
-Writes ``docs/figures/grad_bench.json`` (and the recovery figures under
-``docs/figures/recovery/``).
+``--quick`` runs every part with :data:`QUICK` sizes (16^2 map, 48^2 plane and sphere
+tessellations, 32^2 / 16^2 images, one seed per check, one procedural parameter per
+texture, 2 recovery steps).
+
+Writes ``grad_bench.json`` and the recovery figures (``recovery/``) under ``--out`` (default:
+a folder ``mi_displace_bench/grad`` in the system's temporary directory); the documentation's
+figures are refreshed by naming them: ``mi-displace bench grad --out docs/figures``.
 """
 from __future__ import annotations
 
@@ -39,18 +44,43 @@ import resource
 import statistics
 import time
 import warnings
+from pathlib import Path
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.bench._timing import print_record
+from mi_displace.bench._timing import output_dir, print_record
 from mi_displace.core import tessellate
-from mi_displace.core.resources import FIGURES_DIR
 from mi_displace.core.texture_height import height_function
 from mi_displace.inverse import figures, gradcheck, recover
 
-RESOLUTION_1M = 708          # 2 * 708^2 = 1,002,528 triangles
+
+class Sizes(NamedTuple):
+    """What a run renders: the plane's ``map_size``² height map tessellated at
+    ``plane_resolution``² cells, the sphere at ``sphere_resolution`` (``sphere_spp``), both
+    at ``image``² pixels; ``edits`` timed edits per path of the mesh re-displacement;
+    ``seeds`` AD and FD seeds per plane check, ``check_seeds`` per procedural / shadow check,
+    checks at ``check_image``² pixels, every ``procedural_step``-th parameter of
+    :data:`~mi_displace.inverse.gradcheck.PROCEDURAL` (2: one per texture); ``iterations``
+    recovery steps on a ``map_size``² map seen at ``recovery_image``² pixels."""
+    map_size: int
+    plane_resolution: int
+    image: int
+    sphere_resolution: int
+    sphere_spp: int
+    edits: int
+    seeds: int
+    check_seeds: int
+    check_image: int
+    procedural_step: int
+    iterations: int
+    recovery_image: int
+
+
+FULL = Sizes(64, 708, 256, 1024, 16, 5, 16, 3, 32, 1, 40, 64)   # 2 * 708^2 = 1,002,528 triangles
+QUICK = Sizes(16, 48, 32, 48, 4, 1, 1, 1, 16, 2, 2, 16)
 
 
 def _peak_rss_gb() -> float:
@@ -58,10 +88,10 @@ def _peak_rss_gb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20
 
 
-def million(truth: np.ndarray) -> dict:
-    """Forward + backward at 1M triangles, 256^2, and the no-gradient overhead."""
-    scene = mi.load_dict(recover.scene_dict(truth, 1, 256, 4, "prb_projective",
-                                            resolution=RESOLUTION_1M))
+def million(truth: np.ndarray, sizes: Sizes = FULL) -> dict:
+    """Forward + backward at 1M triangles, 256^2 (:data:`FULL`), and the no-gradient overhead."""
+    scene = mi.load_dict(recover.scene_dict(truth, 1, sizes.image, 4, "prb_projective",
+                                            resolution=sizes.plane_resolution))
     params = mi.traverse(scene)
     faces = int(params["surface.faces"].shape[0] // 3)
     target = mi.render(scene, spp=4, seed=1)
@@ -116,7 +146,7 @@ def million(truth: np.ndarray) -> dict:
         dr.sync_thread()
         backward_s = time.perf_counter() - clock
     g = np.asarray(grad)
-    return {"faces": faces, "image": 256, "spp": 4, "integrator": "prb_projective",
+    return {"faces": faces, "image": sizes.image, "spp": 4, "integrator": "prb_projective",
             "forward_s": forward_s, "backward_s": backward_s,
             "grad_finite": bool(np.all(np.isfinite(g))), "grad_nonzero_texels": int(np.count_nonzero(g)),
             "peak_rss_before_gb": rss_before, "peak_rss_after_backward_gb": _peak_rss_gb(),
@@ -124,10 +154,12 @@ def million(truth: np.ndarray) -> dict:
             "nograd_overhead_ratio": plugin_s / detached_s, "forward_render_nograd_s": render_s}
 
 
-def million_sphere() -> dict:
-    """A ``scale`` edit, forward and backward on a 1,046,528-triangle displaced sphere."""
-    scene = gradcheck.sphere_scene({"type": "ripples"}, image_size=256, spp=16,
-                                   resolution=1024)
+def million_sphere(sizes: Sizes = FULL) -> dict:
+    """A ``scale`` edit, forward and backward on a 1,046,528-triangle displaced sphere
+    (:data:`FULL`)."""
+    spp = sizes.sphere_spp
+    scene = gradcheck.sphere_scene({"type": "ripples"}, image_size=sizes.image, spp=spp,
+                                   resolution=sizes.sphere_resolution)
     params = mi.traverse(scene)
 
     def edit_time(grad: bool) -> float:
@@ -145,13 +177,13 @@ def million_sphere() -> dict:
         return statistics.median(times[1:])
 
     plain, with_grad = edit_time(False), edit_time(True)
-    target = mi.render(scene, spp=16, seed=1)
+    target = mi.render(scene, spp=spp, seed=1)
     params["ball.scale"] = mi.Float(0.12)
     dr.enable_grad(params["ball.scale"])
     params.update()
     dr.sync_thread()
     clock = time.perf_counter()
-    loss = dr.mean(dr.square(mi.render(scene, params, spp=16, seed=2) - target), axis=None)
+    loss = dr.mean(dr.square(mi.render(scene, params, spp=spp, seed=2) - target), axis=None)
     dr.eval(loss)
     dr.sync_thread()
     forward_s = time.perf_counter() - clock
@@ -160,7 +192,7 @@ def million_sphere() -> dict:
     grad = dr.grad(params["ball.scale"])
     dr.eval(grad)
     dr.sync_thread()
-    return {"faces": scene.shapes()[0].face_count(), "image": 256, "spp": 16,
+    return {"faces": scene.shapes()[0].face_count(), "image": sizes.image, "spp": spp,
             "integrator": "direct_projective", "redisplace_s": plain,
             "redisplace_grad_s": with_grad, "forward_s": forward_s,
             "backward_s": time.perf_counter() - clock, "grad_scale": float(grad[0]),
@@ -217,18 +249,18 @@ def mesh_redisplacement(edits: int = 5) -> dict:
 
 CHECKS = (("scale", "surface.scale", 0.01), ("midlevel", "surface.midlevel", 0.02),
           ("height", recover.KEY, 0.05))      # (name, key, eps)
-SEEDS = 16                                    # AD and FD seeds per plane check
 
 
-def checks() -> dict:
+def checks(sizes: Sizes = FULL) -> dict:
     """Gradient checks of ``scale``, ``midlevel`` and a texel bump of the height map
-    (16^2 texels, 32^2 image, 64 spp; differences at 256 spp; means of 16 seeds each) under
-    both projective integrators: {integrator: {name: gradcheck.check result}}."""
+    (16^2 texels, 32^2 image, 64 spp; differences at 256 spp; means of 16 seeds each:
+    :data:`FULL`) under both projective integrators: {integrator: {name: gradcheck.check
+    result}}."""
     n = 16
     truth = recover.load_height_map(size=n)
     out = {}
     for integrator in ("direct_projective", "prb_projective"):
-        scene = mi.load_dict(recover.scene_dict(truth, 1, 32, 64, integrator))
+        scene = mi.load_dict(recover.scene_dict(truth, 1, sizes.check_image, 64, integrator))
         target = mi.render(scene, spp=512, seed=99)
         params = mi.traverse(scene)
         params[recover.KEY] = mi.TensorXf((0.25 + 0.5 * truth)[..., None])
@@ -236,24 +268,26 @@ def checks() -> dict:
         bump = gradcheck.texel_bump((n, n, 1), (n // 2, n // 2), 1.5)
         out[integrator] = {name: gradcheck.check(
             scene, key, target, bump if key == recover.KEY else None, eps=eps,
-            repeats=SEEDS, fd_repeats=SEEDS) for name, key, eps in CHECKS}
+            repeats=sizes.seeds, fd_repeats=sizes.seeds) for name, key, eps in CHECKS}
     return out
 
 
-def procedural_checks() -> list:
+def procedural_checks(sizes: Sizes = FULL) -> list:
     """Every :data:`gradcheck.PROCEDURAL` parameter x both integrators x a side light and a
-    light at the eye (3 seeds of AD and of FD each): a list of records."""
+    light at the eye (3 seeds of AD and of FD each: :data:`FULL`): a list of records."""
     out = []
     for integrator in ("direct_projective", "prb_projective"):
         for light_name, light in (("eye", gradcheck.CAMERA), ("side", gradcheck.SIDE_LIGHT)):
-            for texture, name, value, eps in gradcheck.PROCEDURAL:
-                r = gradcheck.check_procedural(texture, name, value, eps, integrator, light)
+            for texture, name, value, eps in gradcheck.PROCEDURAL[::sizes.procedural_step]:
+                r = gradcheck.check_procedural(
+                    texture, name, value, eps, integrator, light, repeats=sizes.check_seeds,
+                    fd_repeats=sizes.check_seeds, image_size=sizes.check_image)
                 out.append({"texture": texture["type"], "parameter": name,
                             "integrator": integrator, "light": light_name, **r})
     return out
 
 
-def shadow_checks() -> list:
+def shadow_checks(sizes: Sizes = FULL) -> list:
     """The shadow-boundary bias: the truth branch's four-bump sphere (a 32 x 16 bitmap,
     h = 0.5 + 0.4 sin(4 pi u) sin(2 pi v); a uniform lift of its texels and ``midlevel``)
     under the side light and a light at the eye; and bricks' ``mortar`` under a 0.6 x 0.6
@@ -264,16 +298,17 @@ def shadow_checks() -> list:
     h = (0.5 + 0.4 * np.sin(4 * np.pi * u) * np.sin(2 * np.pi * v)).astype(np.float32)
     out = []
     for light_name, light in (("side", gradcheck.SIDE_LIGHT), ("eye", gradcheck.CAMERA)):
-        scene = gradcheck.sphere_scene(recover.bitmap_height(h), light=light)
+        scene = gradcheck.sphere_scene(recover.bitmap_height(h), light=light,
+                                       image_size=sizes.check_image)
         for name, key, edit, eps, direction in (
                 ("texel lift", "ball.height.data", mi.TensorXf(np.clip(h - 0.2, 0, 1)[..., None]),
                  0.1, mi.TensorXf(np.ones((16, 32, 1), np.float32))),
                 ("midlevel", "ball.midlevel", mi.Float(0.3), 0.05, None)):
             r = gradcheck.check(scene, key, gradcheck.target_at(scene, key, edit), direction,
-                                eps=eps, repeats=3, fd_repeats=3)
+                                eps=eps, repeats=sizes.check_seeds, fd_repeats=sizes.check_seeds)
             out.append({"scene": "four bumps", "parameter": name, "light": light_name, **r})
     for sppi in (0, 64):
-        base = gradcheck.sphere_scene({"type": "bricks"})
+        base = gradcheck.sphere_scene({"type": "bricks"}, image_size=sizes.check_image)
         area = {"type": "rectangle", "to_world": mi.ScalarTransform4f().look_at(
             origin=list(gradcheck.SIDE_LIGHT), target=[0, 0, 0], up=[0, 0, 1]).scale(0.3),
             "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 20 / 0.36}}}
@@ -282,24 +317,27 @@ def shadow_checks() -> list:
                               "integrator": {"type": "direct_projective", "sppi": sppi}})
         key = "ball.height.mortar"
         r = gradcheck.check(scene, key, gradcheck.target_at(scene, key, 0.15), eps=0.01,
-                            repeats=3, fd_repeats=3)
+                            repeats=sizes.check_seeds, fd_repeats=sizes.check_seeds)
         out.append({"scene": "bricks, area light", "parameter": "mortar",
                     "light": f"area, sppi {sppi}", **r})
     return out
 
 
-def run() -> dict:
-    truth = recover.load_height_map(size=64)
-    big = million(truth)
-    sphere = million_sphere()
-    mesh = mesh_redisplacement()
-    grads = checks()
+def run(out: Path, sizes: Sizes = FULL) -> dict:
+    """Every part (module docstring) at ``sizes``; the recovery figures go to ``out/recovery``."""
+    truth = recover.load_height_map(size=sizes.map_size)
+    big = million(truth, sizes)
+    sphere = million_sphere(sizes)
+    mesh = mesh_redisplacement(sizes.edits)
+    grads = checks(sizes)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")   # Mitsuba's sppi warning for point lights
-        procedural = procedural_checks()
-        shadows = shadow_checks()
-    rec = recover.recover(truth, iterations=40, integrator="prb_projective")
-    figures.write(rec, FIGURES_DIR / "recovery")
+        procedural = procedural_checks(sizes)
+        shadows = shadow_checks(sizes)
+    rec = recover.recover(truth, iterations=sizes.iterations, integrator="prb_projective",
+                          image_size=sizes.recovery_image)
+    (out / "recovery").mkdir(exist_ok=True)
+    figures.write(rec, out / "recovery")
     eye = [r["rel_error"] for r in procedural if r["light"] == "eye"]
     summary = {
         "faces": big["faces"], "forward_s": big["forward_s"], "backward_s": big["backward_s"],
@@ -318,10 +356,11 @@ def run() -> dict:
             "procedural": procedural, "shadows": shadows, "recovery": rec.summary()}
 
 
-def main(json: bool = False) -> int:
-    result = run()
-    figures_dir = FIGURES_DIR
-    figures_dir.mkdir(parents=True, exist_ok=True)
+def main(json: bool = False, quick: bool = False, out=None) -> int:
+    """Run the benchmark (:data:`QUICK` sizes with ``quick``); its JSON and figures go to
+    ``out`` (default: :func:`~mi_displace.bench._timing.output_dir`)."""
+    figures_dir = output_dir("grad", out)
+    result = run(figures_dir, QUICK if quick else FULL)
     (figures_dir / "grad_bench.json").write_text(_json.dumps(result, indent=2))
     print_record(result["summary"], json, width=0)
     return 0

@@ -6,12 +6,14 @@ steps at a time, alternating twice between the plugin as it is and the plugin re
 per-load work (thin-shell rays, topology, vertex frames) on every edit
 (:func:`mi_displace.bench.grad.redo_per_load_work`, what every edit did before), same
 process; plus :func:`mi_displace.bench.grad.mesh_redisplacement` (one edit alone).
-Prints medians and ratios; writes nothing.
+Prints medians and ratios; writes nothing.  ``--quick``: :data:`QUICK` sizes (one view x 2
+lights at 32^2, a 16^2 map, one step at a time, one timed edit).
 """
 from __future__ import annotations
 
 import json as _json
 import warnings
+from typing import NamedTuple
 
 import mitsuba as mi
 import numpy as np
@@ -20,10 +22,27 @@ from mi_displace.bench import grad
 from mi_displace.inverse import bunny, recover
 
 
-def run(steps: int = 3) -> dict:
-    baked, _, scale = bunny.baked_map(64)
-    views, spp, target_spp = 4, 8, 64
-    common = (bunny.origins(views), bunny.CENTRE, bunny.UP, 30, 96)
+class Sizes(NamedTuple):
+    """What a run renders: ``views`` views x 2 lights at ``image``² pixels, ``spp``
+    (targets at ``target_spp``), a ``map_size``² map, ``steps`` Adam steps per timed run,
+    ``edits`` timed edits of :func:`mi_displace.bench.grad.mesh_redisplacement`."""
+    views: int
+    image: int
+    spp: int
+    target_spp: int
+    map_size: int
+    steps: int
+    edits: int
+
+
+FULL = Sizes(4, 96, 8, 64, 64, 3, 5)
+QUICK = Sizes(1, 32, 2, 8, 16, 1, 1)
+
+
+def run(sizes: Sizes = FULL) -> dict:
+    baked, _, scale = bunny.baked_map(sizes.map_size)
+    views, spp, target_spp, steps = sizes.views, sizes.spp, sizes.target_spp, sizes.steps
+    common = (bunny.origins(views), bunny.CENTRE, bunny.UP, 30, sizes.image)
     targets, scenes = [], []
     for light in recover.LIGHTS:
         lit = [light[0], light[2], light[1]]   # as recover_bunny: the z-up directions, y-up
@@ -53,13 +72,14 @@ def run(steps: int = 3) -> dict:
     kept_s, again_s = (float(np.median(seconds[k])) for k in ("kept", "per_load_again"))
     return {"faces": shapes[0].face_count(), "seconds_per_iteration": kept_s,
             "seconds_per_iteration_per_load_work_again": again_s,
-            "iteration_ratio": again_s / kept_s, "edit": grad.mesh_redisplacement()}
+            "iteration_ratio": again_s / kept_s, "edit": grad.mesh_redisplacement(sizes.edits)}
 
 
-def main(json: bool = False) -> int:
+def main(json: bool = False, quick: bool = False) -> int:
+    """Run the benchmark (:data:`QUICK` sizes with ``quick``) and print its record."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")   # the bunny's ears: 2 vertices cross the base
-        result = run()
+        result = run(QUICK if quick else FULL)
     print(_json.dumps(result, indent=2) if json else "\n".join(
         f"{k}: {v}" for k, v in result.items()))
     return 0

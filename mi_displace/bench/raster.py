@@ -12,14 +12,16 @@ All in one process, 512 x 512, one directional light + ambient, warm medians:
 * ``llvmpipe_s``: the same mesh drawn by Mesa's llvmpipe (OpenGL 4.5 on the CPU, headless
   EGL, through ``moderngl``) with per-vertex Lambert shading and depth test, frame incl.
   read-back; ``llvmpipe_upload_s``: with the vertex upload; ``null`` with
-  ``llvmpipe_reason`` when the system libraries cannot be installed.  The set-up step
-  installs them (Debian ``libegl1 libgl1-mesa-dri libegl-mesa0`` through apt-get when root,
-  ``moderngl`` through pip): bench-only, not a dependency of the package;
+  ``llvmpipe_reason`` ("peer unavailable: ...") when ``moderngl`` or Mesa's EGL is missing
+  (:mod:`mi_displace.bench.peers.llvmpipe`; ``scripts/setup_peers.sh`` installs them);
 * ``ddm_frame_s``: an animated HDDM frame of the paper's camel-scale scene (Spot tiled with
   70 x 70 chains, ``maps`` at 256², ~4.7M vertices): ``time`` edit (mapping) + z-buffer
   draw + shading at 512², no build; ``ddm_frame_shadow_map_s`` with a shadow map;
   ``ddm_frame_raytrace_s``: the same frame with the shape in the scene (the update
   rebuilds Mitsuba's acceleration structure) and ray-traced visibility.
+
+``--quick`` runs the same with :data:`QUICK` sizes (128^2, a 10k-triangle sphere, Spot with
+10 x 10 chains and 64^2 maps).
 
 ``python -m mi_displace.bench.raster --figures DIR`` also measures the z-buffer / ray
 tracing consistency on the repository's scenes and the shadow-map trade (resolution,
@@ -30,25 +32,35 @@ Cornell box (area light on a rectangle) against a path-traced reference (max_dep
 from __future__ import annotations
 
 import argparse
-import ctypes.util
-import importlib
 import json as _json
-import os
-import shutil
-import subprocess
-import sys
 from pathlib import Path
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from mi_displace.bench._timing import median_time
+from mi_displace.bench.peers import measure
 from mi_displace.core.resources import data_path, scene_path
 from mi_displace.render import raster
 
 SPOT = str(data_path("spot", "spot_triangulated.obj"))
 RES = 512
+
+
+class Sizes(NamedTuple):
+    """What a run draws: the sphere at ``resolution`` ``nu`` (about nu^2 triangles), films
+    of ``res`` x ``res`` pixels, the camel scene's ``camel_tiles`` x ``camel_tiles`` chains
+    with ``camel_maps`` x ``camel_maps`` HDDM maps."""
+    nu: int
+    res: int
+    camel_tiles: int
+    camel_maps: int
+
+
+FULL = Sizes(2000, RES, 70, 256)
+QUICK = Sizes(100, 128, 10, 64)
 SUN_DIRECTION = (-1.0, 1.0, -1.0)
 ALBEDO = (0.7, 0.6, 0.5)
 
@@ -95,131 +107,39 @@ def _unbuilt(shape, options: raster.Options, **kw) -> mi.Scene:
 
 # --- the GL peer ----------------------------------------------------------------------
 
-def setup_llvmpipe() -> str | None:
-    """Make ``moderngl`` + EGL on Mesa available; returns None, or why it is not."""
-    if not (ctypes.util.find_library("EGL") and Path("/usr/lib/x86_64-linux-gnu/libEGL_mesa.so.0").exists()
-            or ctypes.util.find_library("EGL_mesa")):
-        if os.geteuid() != 0 or not shutil.which("apt-get"):
-            return "EGL / Mesa missing (install libegl1 libgl1-mesa-dri libegl-mesa0)"
-        env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-        done = subprocess.run(["apt-get", "install", "-y", "libegl1", "libgl1-mesa-dri",
-                               "libegl-mesa0"], env=env, capture_output=True, text=True)
-        if done.returncode != 0:
-            subprocess.run(["apt-get", "update"], env=env, capture_output=True)
-            done = subprocess.run(["apt-get", "install", "-y", "libegl1", "libgl1-mesa-dri",
-                                   "libegl-mesa0"], env=env, capture_output=True, text=True)
-            if done.returncode != 0:
-                return f"apt-get install libegl1 libgl1-mesa-dri libegl-mesa0 failed: {done.stderr[-200:]}"
-    try:
-        importlib.import_module("moderngl")
-    except ImportError:
-        done = subprocess.run([sys.executable, "-m", "pip", "install", "-q", "moderngl"],
-                              capture_output=True, text=True)
-        if done.returncode != 0:
-            return f"pip install moderngl failed: {done.stderr[-200:]}"
-        importlib.invalidate_caches()
-    try:
-        import moderngl
-
-        ctx = moderngl.create_standalone_context(backend="egl")
-        renderer = ctx.info["GL_RENDERER"]
-        ctx.release()
-    except Exception as error:  # noqa: BLE001 -- any failure is the reason reported
-        return f"no EGL context: {error}"
-    return None if "llvmpipe" in renderer else f"EGL renderer is {renderer!r}, not llvmpipe"
-
-
-_VERTEX = """
-#version 330
-uniform mat4 mvp;
-uniform vec3 to_light;
-uniform vec3 albedo;
-in vec3 in_pos;
-in vec3 in_nrm;
-out vec3 color;
-void main() {
-    color = albedo / 3.14159265 * max(dot(normalize(in_nrm), to_light), 0.0) + albedo * 0.1;
-    gl_Position = mvp * vec4(in_pos, 1.0);
-}
-"""
-_FRAGMENT = """
-#version 330
-in vec3 color;
-out vec4 frag;
-void main() { frag = vec4(color, 1.0); }
-"""
-
-
 def llvmpipe_frame(shape, sensor: mi.Sensor, res: int = RES) -> dict:
-    """Draw ``shape`` through llvmpipe: warm frame (clear, draw, read-back) and upload times."""
-    import moderngl
+    """Draw ``shape`` through llvmpipe as ``sensor`` (fov 30) sees it
+    (:func:`mi_displace.bench.peers.llvmpipe.mesh_frame`)."""
+    from mi_displace.bench.peers import llvmpipe
 
-    positions = np.asarray(shape.vertex_positions_buffer(), np.float32).reshape(-1, 3)
-    normals = np.asarray(shape.vertex_normals_buffer(), np.float32).reshape(-1, 3)
-    faces = np.asarray(shape.faces_buffer(), np.uint32)
-    to_local = np.linalg.inv(np.array(sensor.world_transform().matrix, np.float64).reshape(4, 4))
-    near, far = 0.1, 100.0
-    f = 1 / np.tan(np.radians(30) / 2)
-    # Mitsuba's camera looks along +z with x to the left: mirror x so the image matches
-    projection = np.array([[-f, 0, 0, 0], [0, f, 0, 0],
-                           [0, 0, (far + near) / (far - near), -2 * far * near / (far - near)],
-                           [0, 0, 1, 0]])
-    mvp = (projection @ to_local).astype(np.float32)
-    ctx = moderngl.create_standalone_context(backend="egl")
-    try:
-        program = ctx.program(vertex_shader=_VERTEX, fragment_shader=_FRAGMENT)
-        program["mvp"].write(mvp.T.tobytes())
-        to_light = -np.array(SUN_DIRECTION) / np.linalg.norm(SUN_DIRECTION)
-        program["to_light"].value = tuple(to_light)
-        program["albedo"].value = ALBEDO
-        vertices = np.hstack([positions, normals]).astype(np.float32)
-        vbo = ctx.buffer(vertices.tobytes())
-        ibo = ctx.buffer(faces.tobytes())
-        vao = ctx.vertex_array(program, [(vbo, "3f 3f", "in_pos", "in_nrm")], ibo)
-        fbo = ctx.framebuffer(color_attachments=[ctx.renderbuffer((res, res), 4, dtype="f4")],
-                              depth_attachment=ctx.depth_renderbuffer((res, res)))
-        ctx.enable(moderngl.DEPTH_TEST)
-
-        def frame():
-            fbo.use()
-            fbo.clear(0.1, 0.1, 0.1, 1.0)
-            vao.render(moderngl.TRIANGLES)
-            return np.frombuffer(fbo.read(components=3, dtype="f4"), np.float32)
-
-        def upload_frame():
-            vbo.write(vertices.tobytes())
-            return frame()
-
-        frame_s = median_time(frame, 5)
-        upload_s = median_time(upload_frame, 3)
-        image = frame().reshape(res, res, 3)[::-1]
-        return {"llvmpipe_s": frame_s, "llvmpipe_upload_s": upload_s,
-                "llvmpipe_renderer": ctx.info["GL_RENDERER"],
-                "llvmpipe_threads": os.environ.get("LP_NUM_THREADS", "default (all cores)"),
-                "image": image}
-    finally:
-        ctx.release()
+    to_camera = np.linalg.inv(np.array(sensor.world_transform().matrix, np.float64).reshape(4, 4))
+    return llvmpipe.mesh_frame(
+        np.asarray(shape.vertex_positions_buffer(), np.float32).reshape(-1, 3),
+        np.asarray(shape.vertex_normals_buffer(), np.float32).reshape(-1, 3),
+        np.asarray(shape.faces_buffer(), np.uint32).reshape(-1, 3), to_camera, 30.0, res,
+        -np.array(SUN_DIRECTION) / np.linalg.norm(SUN_DIRECTION), ALBEDO)
 
 
 # --- the measurements -------------------------------------------------------------------
 
-def ddm_camel(time_value: float = 0.0) -> dict:
-    """The paper's camel-scale scene (Fig. 9, Table 1): Spot tiled with 70 x 70 chains,
-    HDDM maps at 256², animated by a texture-space velocity."""
-    return {"type": "ddm", "base": "mesh", "filename": SPOT, "tile": "chain", "tiles_u": 70,
-            "tiles_v": 70, "height": 0.03, "mode": "maps", "map_resolution": 256,
+def ddm_camel(sizes: Sizes = FULL, time_value: float = 0.0) -> dict:
+    """The paper's camel-scale scene (Fig. 9, Table 1; :data:`FULL`: Spot tiled with 70 x 70
+    chains, HDDM maps at 256²), animated by a texture-space velocity."""
+    return {"type": "ddm", "base": "mesh", "filename": SPOT, "tile": "chain",
+            "tiles_u": sizes.camel_tiles, "tiles_v": sizes.camel_tiles, "height": 0.03,
+            "mode": "maps", "map_resolution": sizes.camel_maps,
             "velocity_u": 0.05, "time": time_value,
             "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(ALBEDO)}}}
 
 
-def ddm_frames(out: dict) -> None:
+def ddm_frames(out: dict, sizes: Sizes = FULL) -> None:
     """``ddm_frame_*`` fields: an animated HDDM frame, z-buffer vs ray tracing."""
     import warnings
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        shape = mi.load_dict(ddm_camel())
-    sensor = camera(origin=(0, -2.2, 0.6), target=(0, 0, 0.0), fov=40)
+        shape = mi.load_dict(ddm_camel(sizes))
+    sensor = camera(sizes.res, origin=(0, -2.2, 0.6), target=(0, 0, 0.0), fov=40)
     out["ddm_vertices"] = shape.vertex_count()
     out["ddm_faces"] = shape.face_count()
     params = mi.traverse(shape)
@@ -243,7 +163,7 @@ def ddm_frames(out: dict) -> None:
     del zb, zbm
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        rt = scene({"camel": ddm_camel()}, raster.Options(shadows="none"), sensor=sensor)
+        rt = scene({"camel": ddm_camel(sizes)}, raster.Options(shadows="none"), sensor=sensor)
     scene_params = mi.traverse(rt)
 
     def edit_scene(t):
@@ -253,56 +173,53 @@ def ddm_frames(out: dict) -> None:
     out["ddm_frame_raytrace_s"] = median_time(frame(rt, edit_scene), 3)
 
 
-def run(nu: int = 2000, with_ddm: bool = True, with_gl: bool = True) -> dict:
+def run(sizes: Sizes = FULL, with_ddm: bool = True, with_gl: bool = True) -> dict:
     """Measure everything; returns the JSON record (seconds, counts).
 
     Args:
-        nu: sphere tessellation (2000: ~4M triangles); smaller for a quick check.
+        sizes: :data:`FULL` (the documented numbers) or :data:`QUICK`.
         with_ddm: measure the ``ddm_frame_*`` fields.
-        with_gl: set up and measure the llvmpipe peer (else ``llvmpipe_s`` is null).
+        with_gl: measure the llvmpipe peer (else ``llvmpipe_s`` is null).
     """
-    record = {"variant": mi.variant(), "resolution": RES}
-    shape = mi.load_dict(sphere(nu))
+    record = {"variant": mi.variant(), "resolution": sizes.res}
+    shape = mi.load_dict(sphere(sizes.nu))
     dr.sync_thread()
     record["faces"] = shape.face_count()
-    zb = _unbuilt(shape, raster.Options(visibility="zbuffer", shadows="none"))
+    sensor = camera(sizes.res)
+    zb = _unbuilt(shape, raster.Options(visibility="zbuffer", shadows="none"), sensor=sensor)
     record["zbuffer_s"] = median_time(lambda: _image(zb))
     zb_image = _image(zb)
-    zbm = _unbuilt(shape, raster.Options(visibility="zbuffer", shadows="map"))
+    zbm = _unbuilt(shape, raster.Options(visibility="zbuffer", shadows="map"), sensor=sensor)
     record["zbuffer_shadow_map_s"] = median_time(lambda: _image(zbm))
     del zbm
 
     def build():
-        return scene({"shape": shape}, raster.Options(shadows="none"))
+        return scene({"shape": shape}, raster.Options(shadows="none"), sensor=sensor)
 
     record["accel_build_s"] = median_time(lambda: (build(), dr.sync_thread()), 3)
     record["raytrace_s"] = median_time(lambda: _image(build()), 3)
     rt_image = _image(build())
-    rtr = scene({"shape": shape}, raster.Options(shadows="ray"))
+    rtr = scene({"shape": shape}, raster.Options(shadows="ray"), sensor=sensor)
     record["raytrace_shadow_rays_s"] = record["accel_build_s"] + median_time(lambda: _image(rtr), 3)
     del rtr
     record["zbuffer_vs_raytrace_pixels_differing"] = float(
         np.mean(np.abs(zb_image - rt_image).max(axis=2) > 1e-3))
-    reason = setup_llvmpipe() if with_gl else "not requested (run(with_gl=False))"
     record["llvmpipe_s"] = None
-    if reason is None:
-        try:
-            gl = llvmpipe_frame(shape, zb.sensors()[0])
-            gl_image = gl.pop("image")
-            record.update(gl)
-            # the same pixels covered (both backgrounds are 0.1)
-            covered = np.abs(zb_image - 0.1).max(axis=2) > 1e-3
-            gl_covered = np.abs(gl_image - 0.1).max(axis=2) > 1e-3
-            record["llvmpipe_coverage_agreement"] = float(np.mean(covered == gl_covered))
-        except Exception as error:  # noqa: BLE001 -- reported, the rest of the bench stands
-            reason = f"llvmpipe draw failed: {error}"
-    if reason is not None:
-        record["llvmpipe_reason"] = reason
-    else:
+    gl, reason = (measure(llvmpipe_frame, shape, zb.sensors()[0], sizes.res) if with_gl
+                  else (None, "not requested (run(with_gl=False))"))
+    if gl is not None:
+        gl_image = gl.pop("image")
+        record.update(gl)
+        # the same pixels covered (both backgrounds are 0.1)
+        covered = np.abs(zb_image - 0.1).max(axis=2) > 1e-3
+        gl_covered = np.abs(gl_image - 0.1).max(axis=2) > 1e-3
+        record["llvmpipe_coverage_agreement"] = float(np.mean(covered == gl_covered))
         record["zbuffer_vs_llvmpipe"] = record["zbuffer_s"] / record["llvmpipe_s"]
+    else:
+        record["llvmpipe_reason"] = reason
     del zb, shape
     if with_ddm:
-        ddm_frames(record)
+        ddm_frames(record, sizes)
     record["targets"] = {"zbuffer_s": "< llvmpipe_s", "ddm_frame_s": 0.5}
     return record
 
@@ -647,9 +564,10 @@ def figures(out_dir: Path) -> dict:
     return record
 
 
-def main(json: bool = False) -> dict:
-    """Run the benchmark; print JSON (``json``) or one ``key = value`` line per field."""
-    record = run()
+def main(json: bool = False, quick: bool = False) -> dict:
+    """Run the benchmark (:data:`QUICK` sizes with ``quick``); print JSON (``json``) or one
+    ``key = value`` line per field."""
+    record = run(QUICK if quick else FULL)
     print(_json.dumps(record, indent=2) if json else
           "\n".join(f"{key} = {value}" for key, value in record.items()))
     return record

@@ -15,45 +15,61 @@ All on ``scenes/vdm_torus.xml`` (torus R = 1, r = 0.4, cells height field, depth
 * ``flip_vs_reference`` and the measured Table 1 (``methods``): every method against the
   true displacement (raster, 256 x 256, 4 x 4 samples) in the shadow / occlusion /
   silhouette masks (:mod:`mi_displace.vdm.methods`).
+
+``--quick`` runs the same with :data:`QUICK` sizes (a 16^2 x 8 x 4 x 4 table, renders at
+64^2, the Table 1 masks at 32^2, the true displacement at resolution 256).
 """
 from __future__ import annotations
 
 import gc
 import json as _json
 import os
-import statistics
 import tempfile
 import time
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
 
+from mi_displace.bench._timing import median_time
 from mi_displace.core.resources import scene_path
 
 SCENE = scene_path("vdm_torus.xml")
 TARGETS = {"build_time_s": 10.0, "render_time_warm_s": 0.3, "compression_ratio": 10.0}
 
 
-def _median_render(scene, repeats=5) -> float:
+class Sizes(NamedTuple):
+    """What a run renders: speed frames at ``res``² pixels (``repeats`` warm renders each),
+    the Table 1 masks at ``methods_res``², and the scene's own parameters ``params`` (table
+    sizes, the true displacement's resolution; :data:`mi_displace.vdm.methods.MODE_PARAMS`)."""
+    res: int
+    methods_res: int
+    repeats: int
+    params: dict
+
+
+FULL = Sizes(512, 256, 5, {})
+QUICK = Sizes(64, 32, 2, {"resolution": 256, "vdm_res": 16, "vdm_phi": 8, "vdm_theta": 4,
+                          "vdm_curvatures": 4})
+
+
+def _median_render(scene, repeats: int) -> float:
+    """Warm median seconds of a raster render (one sample per pixel) of ``scene``."""
     from mi_displace.render import raster
 
     sensor = scene.sensors()[0]
-    times = []
-    for _ in range(repeats + 1):
-        dr.sync_thread()
-        start = time.perf_counter()
-        img = raster.render(scene, sensor, aa=1)
-        dr.eval(img)
-        dr.sync_thread()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times[1:])
+    return median_time(lambda: dr.eval(raster.render(scene, sensor, aa=1)), repeats)
 
 
-def run() -> dict:
+def run(sizes: Sizes = FULL) -> dict:
     from mi_displace.render import scene as scenes
     from mi_displace.vdm import build, methods, table
 
-    approx, _ = scenes.load(SCENE, mode="approximation", integrator="raster", res=512)
+    def load(mode):
+        return scenes.load(SCENE, mode=mode, integrator="raster", res=sizes.res,
+                           **methods.params_for(mode, sizes.params))[0]
+
+    approx = load("approximation")
     bsdf = approx.shapes()[0].bsdf()
     spec = bsdf.data.spec
     heights = table.sample_heights(bsdf.height, spec.res, bsdf.tiling)
@@ -65,19 +81,20 @@ def run() -> dict:
     rmse_vdm, rmse_mvm = data.reconstruction_rmse(8, 4)
     table_b, comp_b = data.table_bytes(), data.compressed.nbytes(8, 4)
 
-    render_s = _median_render(approx)
+    render_s = _median_render(approx, sizes.repeats)
     start = time.perf_counter()
-    ref, _ = scenes.load(SCENE, mode="reference", integrator="raster", res=512)
+    ref = load("reference")
     ref_build = time.perf_counter() - start
-    ref_render = _median_render(ref)
+    ref_render = _median_render(ref, sizes.repeats)
     del ref
     gc.collect()
-    base, _ = scenes.load(SCENE, mode="base", integrator="raster", res=512)
-    base_render = _median_render(base)
+    base = load("base")
+    base_render = _median_render(base, sizes.repeats)
     del base, approx
     gc.collect()
 
-    result = methods.methods_table(SCENE, {"res": "256"}, repeats=3)
+    result = methods.methods_table(SCENE, {**sizes.params, "res": str(sizes.methods_res)},
+                                   repeats=min(3, sizes.repeats))
     rows = result["rows"]
     vdm_row = next(r for r in rows if r["method"] == "approximation")
     return {
@@ -101,13 +118,14 @@ def run() -> dict:
     }
 
 
-def main(json: bool = False) -> dict:
+def main(json: bool = False, quick: bool = False) -> dict:
+    """Run the benchmark (:data:`QUICK` sizes with ``quick``) and print its record."""
     # a private table cache, so that the bench never reads a stale one
     with tempfile.TemporaryDirectory() as tmp:
         old = os.environ.get("MI_DISPLACE_CACHE")
         os.environ["MI_DISPLACE_CACHE"] = tmp
         try:
-            record = run()
+            record = run(QUICK if quick else FULL)
         finally:
             if old is None:
                 del os.environ["MI_DISPLACE_CACHE"]

@@ -21,18 +21,19 @@ texture memory, accuracy, and VTK's CPU volume renderer on the same volume.
   capped at 256 spp (with its ``noise_floor_flip``);
 * ``vtk_s``: VTK's ``vtkFixedPointVolumeRayCastMapper`` on the undisplaced 256^3 volume,
   512 x 512, sample distance 1.0, automatic adjustment off, shading on, 2 threads, EGL
-  off-screen window, warm median of 3; ``null`` with ``vtk_reason`` when it cannot run.
-  The set-up step installs the PyPI ``vtk`` wheel and Debian's ``libegl1 libgl1-mesa-dri``
-  when missing (they are not dependencies of mi-displace).
+  off-screen window, warm median of 3; ``null`` with ``vtk_reason`` ("peer unavailable:
+  ...") when ``vtk`` or Mesa's EGL is missing (:mod:`mi_displace.bench.peers.vtk_volume`;
+  ``scripts/setup_peers.sh`` installs them).
+
+``--quick`` runs the same with :data:`QUICK` sizes (a 64^3 walnut, 128^2 frames, 2 warm
+renders each, the comparison at 32^2 with references capped at 16 spp).
 """
 from __future__ import annotations
 
-import os
 import statistics
-import subprocess
-import sys
 import tempfile
 import time
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
@@ -49,20 +50,38 @@ TARGETS = {"undisplaced_vs_vtk": 2.0, "displacement_overhead": 1.6}
 #: Warm renders of each frame (after a cold one); at 0.05-0.1 s a frame, 5 left the ratio
 #: drifting by +-0.3 between runs on a loaded machine
 REPEATS = 15
+
+
+class Sizes(NamedTuple):
+    """What a run renders: the walnut resampled to ``voxels``^3, frames of ``size`` x
+    ``size`` pixels, ``repeats`` warm renders of each, the comparison scene at ``flip_res``
+    x ``flip_res`` with references capped at ``flip_max_spp``."""
+    voxels: int
+    size: int
+    repeats: int
+    flip_res: int
+    flip_max_spp: int
+
+
+FULL = Sizes(RES, SIZE, REPEATS, 96, 256)
+QUICK = Sizes(64, 128, 2, 32, 16)
+
 #: Paper's Table 2 maps: (primitive, resolution); our D_k needs >= 2 nodes per axis.
 TABLE2 = [("peel", (128, 128, 2), 320), ("slabs", (128, 128, 2), 320),
           ("gaussian", (32, 32, 32), 640), ("seam", (64, 64, 64), 5120)]
 
 
-def walnut_256():
-    """The walnut CT resampled to 256^3 (trilinear), as an ObjectVolume in [-0.5, 0.5]^3."""
+def walnut_256(voxels: int = RES):
+    """The walnut CT resampled to ``voxels``^3 (trilinear; default 256), as an ObjectVolume
+    in [-0.5, 0.5]^3."""
     from scipy.ndimage import zoom
 
     from mi_displace.volume.objects import ObjectVolume, load_raw
 
     w = load_raw(WALNUT)
-    data = zoom(w.data, (RES / w.shape[0], RES / w.shape[1], RES / w.shape[2]), order=1)
-    return ObjectVolume(data, [-0.5] * 3, [0.5] * 3, value_range=(0.0, 1.0), name="walnut 256^3")
+    data = zoom(w.data, (voxels / w.shape[0], voxels / w.shape[1], voxels / w.shape[2]), order=1)
+    return ObjectVolume(data, [-0.5] * 3, [0.5] * 3, value_range=(0.0, 1.0),
+                        name=f"walnut {voxels}^3")
 
 
 # The bench frame's light, the Gaussian pull's placement M (§6) and the volumes' transfer
@@ -79,10 +98,10 @@ def sun_scene():
                                                   "irradiance": {"type": "rgb", "value": 2.5}}})
 
 
-def _sensor():
+def _sensor(size: int = SIZE):
     return mi.load_dict({"type": "perspective", "fov": FOV,
                          "to_world": mi.ScalarTransform4f().look_at(origin=list(EYE), target=list(TARGET), up=[0, 0, 1]),
-                         "film": {"type": "hdrfilm", "width": SIZE, "height": SIZE}})
+                         "film": {"type": "hdrfilm", "width": size, "height": size}})
 
 
 def _interleaved_renders(scene, sensor, volumes, settings, repeats=REPEATS) -> list[tuple[float, float, float, np.ndarray]]:
@@ -107,87 +126,12 @@ def _interleaved_renders(scene, sensor, volumes, settings, repeats=REPEATS) -> l
     return [(t[0], statistics.median(t[1:]), statistics.median(c[1:]), img) for t, c, img in zip(times, cpu, images)]
 
 
-def setup_vtk() -> str | None:
-    """Import VTK with an EGL window, installing it first when missing; the reason on failure."""
-    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-    try:
-        import vtk  # noqa: F401
-        return None
-    except ImportError:
-        pass
-    steps = [[sys.executable, "-m", "pip", "install", "-q", "vtk"]]
-    if os.geteuid() == 0:
-        steps.insert(0, ["apt-get", "install", "-y", "-q", "libegl1", "libgl1-mesa-dri"])
-    for cmd in steps:
-        try:
-            subprocess.run(cmd, check=True, capture_output=True, timeout=600)
-        except (OSError, subprocess.SubprocessError) as e:
-            return f"set-up step {' '.join(cmd[:4])} failed: {e}"
-    try:
-        import vtk  # noqa: F401
-    except ImportError as e:
-        return f"vtk does not import after installing it: {e}"
-    return None
+def vtk_time(obj, size: int = SIZE) -> tuple[float | None, str | None]:
+    """VTK fixed-point ray casting of the undisplaced volume (module docstring): ``(seconds,
+    None)``, or ``(None, "peer unavailable: <why>")``."""
+    from mi_displace.bench.peers import measure, vtk_volume
 
-
-def vtk_time(obj) -> tuple[float | None, str | None]:
-    """VTK fixed-point ray casting of the undisplaced volume (module docstring)."""
-    reason = setup_vtk()
-    if reason:
-        return None, reason
-    try:
-        import vtk
-        from vtk.util import numpy_support
-
-        n = obj.shape
-        data = np.ascontiguousarray(np.clip(obj.data * 255, 0, 255).astype(np.uint8))
-        image = vtk.vtkImageData()
-        image.SetDimensions(n[2], n[1], n[0])
-        h = obj.voxel_size
-        image.SetSpacing(*h)
-        image.SetOrigin(*(obj.bbox_min + 0.5 * h))
-        image.GetPointData().SetScalars(numpy_support.numpy_to_vtk(data.ravel(), deep=True,
-                                                                   array_type=vtk.VTK_UNSIGNED_CHAR))
-        mapper = vtk.vtkFixedPointVolumeRayCastMapper()
-        mapper.SetInputData(image)
-        mapper.SetAutoAdjustSampleDistances(0)
-        mapper.SetSampleDistance(1.0 * float(h.min()))  # one voxel, in world units
-        mapper.SetNumberOfThreads(2)
-        opacity = vtk.vtkPiecewiseFunction()
-        opacity.AddPoint(0, 0.0)
-        opacity.AddPoint(255 * (ISO - 0.03), 0.0)
-        opacity.AddPoint(255 * (ISO + 0.03), 1.0)
-        opacity.AddPoint(255, 1.0)
-        color = vtk.vtkColorTransferFunction()
-        color.AddRGBPoint(0, 0.8, 0.7, 0.55)
-        color.AddRGBPoint(255, 0.8, 0.7, 0.55)
-        prop = vtk.vtkVolumeProperty()
-        prop.SetScalarOpacity(opacity)
-        prop.SetColor(color)
-        prop.ShadeOn()
-        prop.SetInterpolationTypeToLinear()
-        volume = vtk.vtkVolume()
-        volume.SetMapper(mapper)
-        volume.SetProperty(prop)
-        renderer = vtk.vtkRenderer()
-        renderer.AddVolume(volume)
-        camera = renderer.GetActiveCamera()
-        camera.SetPosition(*EYE)
-        camera.SetFocalPoint(*TARGET)
-        camera.SetViewUp(0, 0, 1)
-        camera.SetViewAngle(FOV)
-        window = vtk.vtkRenderWindow()
-        window.SetOffScreenRendering(1)
-        window.AddRenderer(renderer)
-        window.SetSize(SIZE, SIZE)
-        times = []
-        for _ in range(4):
-            start = time.perf_counter()
-            window.Render()
-            times.append(time.perf_counter() - start)
-        return statistics.median(times[1:]), None
-    except Exception as e:  # a broken GL stack must not hide the other numbers
-        return None, f"VTK render failed: {' '.join(str(e).split())}"
+    return measure(vtk_volume.raycast_time, obj, EYE, TARGET, FOV, size, ISO)
 
 
 def table2() -> list[dict]:
@@ -203,25 +147,25 @@ def table2() -> list[dict]:
     return rows
 
 
-def run(with_flip: bool = True) -> dict:
+def run(sizes: Sizes = FULL, with_flip: bool = True) -> dict:
     from mi_displace.volume import slicer
     from mi_displace.volume.displacement import DisplacementChain, PlacedMap
     from mi_displace.volume.field import DisplacedVolume
 
-    obj = walnut_256()
-    sensor = _sensor()
+    obj = walnut_256(sizes.voxels)
+    sensor = _sensor(sizes.size)
     scene = sun_scene()
     settings = slicer.SliceSettings(model="surface", normals="jacobian", spacing=1.0, shadows=False, iso=ISO)
     pull = PlacedMap(*PULL, resolution=PULL_RESOLUTION, to_world=PULL_TO_WORLD)
     plain = DisplacedVolume(obj, DisplacementChain([]), **VOLUME_KW)
     displaced = DisplacedVolume(obj, DisplacementChain([pull], bits=16), **VOLUME_KW)
     (cold_u, warm_u, cpu_u, img_u), (cold_d, warm_d, cpu_d, img_d) = _interleaved_renders(
-        scene, sensor, [plain, displaced], settings)
-    vtk_s, vtk_reason = vtk_time(obj)
+        scene, sensor, [plain, displaced], settings, sizes.repeats)
+    vtk_s, vtk_reason = vtk_time(obj, sizes.size)
     coverage_u, coverage_d = (float((img.max(-1) > 0).mean()) for img in (img_u, img_d))
     record = {
         "voxels": int(obj.data.size),
-        "resolution": [SIZE, SIZE],
+        "resolution": [sizes.size, sizes.size],
         "render_time_warm_s": warm_d,
         "render_time_cold_s": cold_d,
         "undisplaced_time_warm_s": warm_u,
@@ -245,13 +189,14 @@ def run(with_flip: bool = True) -> dict:
         from mi_displace.evaluate.compare import compare
 
         with tempfile.TemporaryDirectory() as tmp:
-            r = compare(SCENE, tmp, params={"res": 96}, max_spp=256)
+            r = compare(SCENE, tmp, params={"res": sizes.flip_res}, max_spp=sizes.flip_max_spp)
         record.update(flip=r["flip_mean"], flip_noise_floor=r["noise_floor_flip"],
                       flip_reference_spp=r["reference_spp"])
     return record
 
 
-def main(json: bool = False) -> dict:
-    record = run()
+def main(json: bool = False, quick: bool = False) -> dict:
+    """Run the benchmark (:data:`QUICK` sizes with ``quick``) and print its record."""
+    record = run(QUICK if quick else FULL)
     print_record(record, json, width=26)
     return record

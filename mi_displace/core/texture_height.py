@@ -55,10 +55,11 @@ def bitmap_decodes_srgb(texture: mi.Texture) -> bool:
     ``raw="true"`` (its texels are sRGB-decoded to linear values before use).
 
     Platform workaround (``docs/platform.md``): Mitsuba 3.9.1's bitmap texture has no
-    accessor for its ``raw`` flag or its file name; both are read from its description."""
-    text = str(texture)
-    if not text.startswith("BitmapTexture["):
+    accessor for its ``raw`` flag or its file name; both are read from its description.
+    Any other texture, a Python one without ``to_string`` included, is not a bitmap."""
+    if not texture.class_name().startswith("BitmapTexture"):
         return False
+    text = str(texture)
     raw = re.search(r"^\s*raw = (\d)", text, re.M)
     name = re.search(r'^\s*name = "(.*)"', text, re.M)
     return (raw is not None and raw[1] == "0" and name is not None

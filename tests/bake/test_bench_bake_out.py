@@ -1,10 +1,14 @@
 """`mi-displace bench bake` writes where --out says, never into the checkout by default (issue 15
 item 11).  The benchmark's parts are replaced by stubs: this checks where files go, not figures."""
 import json
+from pathlib import Path
 
 import pytest
 
 from mi_displace.bench import bake as bench
+from mi_displace.bench._timing import output_dir
+
+REPO = Path(__file__).resolve().parents[2]   # the checkout
 
 
 @pytest.fixture
@@ -14,9 +18,9 @@ def stubbed(monkeypatch):
     meshdiff = {"hausdorff_rel": 0.001, "rms_rel": 0.0001}
     monkeypatch.setattr(bench, "_pair", lambda: (_Mesh(), _Mesh()))
     monkeypatch.setattr(bench, "timing_table", lambda *a: table)
-    monkeypatch.setattr(bench, "cold_start", lambda: {})
-    monkeypatch.setattr(bench, "multistep_example", lambda: {})
-    monkeypatch.setattr(bench, "spot_pairs", lambda: [])
+    monkeypatch.setattr(bench, "cold_start", lambda *a: {})
+    monkeypatch.setattr(bench, "multistep_example", lambda *a: {})
+    monkeypatch.setattr(bench, "spot_pairs", lambda *a: [])
     monkeypatch.setattr(bench, "restoration_sweep", lambda *a: [])
     monkeypatch.setattr(bench, "restoration_and_compression", lambda *a: (meshdiff, comp))
     monkeypatch.setattr("mi_displace.bake.baker.default_max_distance", lambda h, l: (0.1, {}))
@@ -29,11 +33,11 @@ class _Mesh:
 
 
 def test_default_out_is_outside_the_checkout():
-    assert not bench.DEFAULT_OUT.resolve().is_relative_to(bench.REPO.resolve())
+    assert not output_dir("bake").resolve().is_relative_to(REPO.resolve())
 
 
 def test_bench_writes_only_under_out(stubbed, tmp_path, capsys):
-    figures = bench.REPO / "docs" / "figures"
+    figures = REPO / "docs" / "figures"
     before = {p: p.stat().st_mtime_ns for p in figures.iterdir()} if figures.is_dir() else {}
     from mi_displace.cli import main
 

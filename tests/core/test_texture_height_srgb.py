@@ -43,3 +43,21 @@ def test_every_height_consumer_warns_naming_raw(variant, tmp_path, shape):
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)
         mi.load_dict(shape)
+
+
+def test_a_python_texture_is_no_bitmap(variant):
+    """A texture written in Python (no ``to_string``) is not a bitmap, and ``displaced``
+    builds over it (``bench dicing``'s procedural sphere)."""
+    class Flat(mi.Texture):
+        def __init__(self, props):
+            super().__init__(props)
+
+        def eval_1(self, si, active=True):
+            return mi.Float(0.5)
+
+    mi.register_texture("flat_python", lambda props: Flat(props))
+    texture = mi.load_dict({"type": "flat_python"})
+    assert not bitmap_decodes_srgb(texture)
+    shape = mi.load_dict({"type": "displaced", "base": "plane", "resolution": 4, "scale": 0.1,
+                          "height": {"type": "flat_python"}})
+    assert shape.face_count() == 32

@@ -8,7 +8,7 @@ from mi_displace.bench import raster as bench
 
 @pytest.mark.slow
 def test_bench_raster_small(variant_llvm):
-    record = bench.run(nu=80, with_ddm=False, with_gl=False)
+    record = bench.run(bench.QUICK, with_ddm=False, with_gl=False)
     assert record["faces"] > 5_000
     for key in ("zbuffer_s", "zbuffer_shadow_map_s", "raytrace_s", "raytrace_shadow_rays_s",
                 "accel_build_s"):

@@ -1,8 +1,9 @@
 """Blender's half of ``mi-displace bench bake_blender``: Cycles selected-to-active bakes.
 
-Run by a Python that has ``bpy`` (Blender as a module), not by mi_displace's own::
+Run by a Python that has ``bpy`` (Blender as a module), not by mi_displace's own
+(:func:`mi_displace.bench.peers.blender.bake` starts it)::
 
-    python _blender_side.py HIGH.obj LOW.obj RES MAX_DISTANCE OUT_DIR
+    python blender_side.py HIGH.obj LOW.obj RES MAX_DISTANCE OUT_DIR
 
 Imports both OBJs without axis conversion (object coordinates unchanged; the low-poly keeps
 the normals written in its ``vn`` lines as custom normals, the high-poly is smooth-shaded),
