@@ -14,13 +14,14 @@ class MissingExtraError(ImportError):
     """An optional dependency is not installed; the message names the ``pip install`` line."""
 
 
-def require(module: str, extra: str, feature: str) -> ModuleType:
+def require(module: str, extra: str, feature: str | None = None) -> ModuleType:
     """Import ``module``, or raise :class:`MissingExtraError` naming the extra that brings it.
 
     Args:
         module: the module to import, e.g. ``"distributed"``.
         extra: the ``pyproject.toml`` extra that installs it, e.g. ``"cluster"``.
-        feature: what needs it, for the message, e.g. ``"--cluster"``.
+        feature: what needs it, for the message, e.g. ``"--cluster"`` (``None``: the
+            message names the module only).
 
     Returns:
         The imported module.
@@ -30,5 +31,6 @@ def require(module: str, extra: str, feature: str) -> ModuleType:
     except ModuleNotFoundError as e:
         if e.name != module.partition(".")[0] and e.name != module:
             raise  # the module is there but one of its own imports is broken
-        raise MissingExtraError(f"{feature} needs {module!r}, which is not installed: "
-                                f"pip install 'mi-displace[{extra}]'") from None
+        what = (f"{feature} needs {module!r}, which is not installed" if feature
+                else f"{module} is not installed")
+        raise MissingExtraError(f"{what}: pip install 'mi-displace[{extra}]'") from None

@@ -14,8 +14,10 @@ and a benchmark records ``"peer unavailable: <why>"`` in its place (:func:`measu
 """
 from __future__ import annotations
 
-import importlib
 from types import ModuleType
+
+from mi_displace.core.extras import MissingExtraError
+from mi_displace.core.extras import require as require_extra
 
 INSTALL = "pip install 'mi-displace[peers]'"
 SYSTEM = "scripts/setup_peers.sh (Debian: apt-get install libegl1 libgl1-mesa-dri libegl-mesa0)"
@@ -27,12 +29,11 @@ class PeerUnavailable(ImportError):
 
 def require(module_name: str, extra: str = "peers") -> ModuleType:
     """Import ``module_name``, or raise :class:`PeerUnavailable` naming the install line of
-    the extra ``extra`` that provides it."""
+    the extra ``extra`` that provides it (:func:`mi_displace.core.extras.require`)."""
     try:
-        return importlib.import_module(module_name)
-    except ImportError as error:
-        raise PeerUnavailable(f"{module_name} is not installed ({error}); "
-                              f"pip install 'mi-displace[{extra}]'") from error
+        return require_extra(module_name, extra)
+    except MissingExtraError as error:
+        raise PeerUnavailable(str(error)) from error
 
 
 def measure(fn, *args, **kwargs) -> tuple[object, str | None]:
