@@ -31,6 +31,7 @@ SCENES = {
     "relief": ("vdm_torus.xml", {"mode": "relief"}),
     "horizon": ("vdm_torus.xml", {"mode": "horizon"}),
     "restored": ("bake_bunny.xml", {"mode": "approximation"}),
+    "mikk_normalmap": ("bake_bunny.xml", {"mode": "normalmap"}),
     "bricks": ("slicing_plane_grazing.xml", {"mode": "approximation", "slices": "8"}),
     "slicing": ("slicing_plane_grazing.xml", {"mode": "approximation", "slices": "8"}),
     "depth_object": ("slicing_cup_depth.xml", {"mode": "approximation", "slices": "8"}),
