@@ -190,3 +190,20 @@ def test_plugin_density_is_the_documented_chain(variant, tmp_path):
     moved = np.abs(pre - pp).max(1) > 0.05                      # where the pull moves matter
     assert moved.sum() > 1000 and np.abs(got - scale * np.clip(
         (_trilinear(obj, lo, -lo, pp) - tf_low) / (tf_high - tf_low), 0, 1))[moved].max() > 1.0
+
+
+@pytest.mark.parametrize("tf_low", [-0.1, 1.0])
+def test_tf_low_outside_the_normalised_range_is_refused(variant, tf_low):
+    """τ(0) = clip(-tf_low / (tf_high - tf_low), 0, 1) is 0 only for tf_low >= 0: below, every
+    empty voxel and all space outside the object's box would get density (2.9 / unit at
+    tf_low -0.1, tf_high 0.6, density_scale 20); from 1 on, no voxel has any.  Refused at
+    load, naming tf_low."""
+    with pytest.raises(RuntimeError, match=r"tf_low: must lie in \[0, 1\).*got " + str(tf_low)):
+        mi.load_dict({"type": "displaced_volume", "procedural": "piggy_bank", "resolution": 16,
+                      "tf_low": tf_low, "tf_high": 1.5})
+    empty = mi.load_dict({"type": "displaced_volume", "procedural": "piggy_bank", "resolution": 16,
+                          "tf_low": 0.0, "tf_high": 0.6})
+    k = np.argwhere(empty.volume.obj.data == 0)[:, ::-1]        # empty voxels (x, y, z)
+    centres = -0.5 + (k + 0.5) / 16
+    assert len(k) > 100 and np.array(empty.volume.sigma_t(_p(centres))).max() == 0
+    assert np.array(empty.volume.sigma_t(_p([[5.0, 5.0, 5.0]]))).tolist() == [0.0]   # outside the box
