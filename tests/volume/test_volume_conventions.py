@@ -155,7 +155,7 @@ def test_d_k_stores_snorm_displacement_and_unorm_alpha(variant, bits):
     np.testing.assert_allclose(stored[..., 0], np.round(exact / scale * steps) / steps * scale, atol=1e-7)
     assert (stored[..., 0][exact == 0] == 0).all() and np.abs(stored[..., 0]).max() == np.float32(scale)
     a = stored[..., 1] * (2 ** bits - 1)
-    np.testing.assert_allclose(a, np.round(a), atol=2e-3 * 2 ** (bits - 8))
+    np.testing.assert_allclose(a, np.round(a), atol=1e-3 if bits == 8 else 1e-2)   # float32 of k / (2^bits - 1)
     assert a.min() == 0 and 0 < a.max() <= 2 ** bits - 1
 
 
