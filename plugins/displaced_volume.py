@@ -153,8 +153,9 @@ class DisplacedVolumePlugin(mi.Volume):
     def __init__(self, props: mi.Properties):
         if "to_world" in props:   # it would be overwritten below by the medium box: refuse it
             raise ValueError("displaced_volume: parameter 'to_world' is not supported: the object "
-                             "is centred with its longest side 1 world unit (docs/volume.md); place "
-                             "the maps with map<i>_to_world and move the camera, not the object")
+                             "fills its own box (raw: centred, longest side 1 world unit; .vol: its "
+                             "header's box; docs/volume.md, Conventions); place the maps with "
+                             "map<i>_to_world and move the camera, not the object")
         self.output = props.get("output", "sigma_t")
         if self.output not in OUTPUTS:
             raise ValueError(f"displaced_volume: output must be one of {OUTPUTS}, got {self.output!r}")
