@@ -31,6 +31,10 @@ def _sweep_options(p) -> None:
                    help="run the points on a Dask cluster: tcp://HOST:PORT, or local:N")
     p.add_argument("--cache", type=Path, default=None, metavar="DIR",
                    help="point cache (default $MI_DISPLACE_CACHE/tradeoff or ~/.cache/mi_displace/tradeoff)")
+    p.add_argument("--denoise", default=None, choices=("fast", "balanced", "high"),
+                   metavar="QUALITY",
+                   help="also measure the path curve denoised by Open Image Denoise at this "
+                        "quality (fast, balanced, high; the 'denoise' extra)")
 
 
 def _knobs(p) -> None:
@@ -51,7 +55,7 @@ def _cmd_tradeoff(args) -> int:
 
     r = tradeoff(args.scene, _parsed_knobs(args), out_dir=args.out, params=dict(args.defines),
                  max_spp=args.max_spp, cluster=args.cluster, cache_dir=args.cache, progress=None,
-                 noise_floor=args.noise_floor)
+                 noise_floor=args.noise_floor, denoise=args.denoise)
     print(f"reference {r['reference_spp']} spp{' (capped)' if r['spp_capped'] else ''}, "
           f"noise floor FLIP {r['noise_floor_flip']:.4f}")
     for p in r["points"]:
@@ -62,6 +66,8 @@ def _cmd_tradeoff(args) -> int:
                  else "path does not reach it within the curve")
         print(f"  {p['label']}: FLIP {p['flip']:.4f}, {p['time_warm_s']:.3g} s warm"
               f"{' (Pareto)' if p['pareto'] else ''}; {cross}")
+        if p["denoised_verdict"]:
+            print(f"    {p['denoised_verdict']}")
     print(f"wrote {args.out}/tradeoff.csv, tradeoff.json, tradeoff.png")
     return 0
 
@@ -71,7 +77,9 @@ def _cmd_tune(args) -> int:
 
     r = tune(args.scene, args.flip, _parsed_knobs(args), out_dir=args.out,
              params=dict(args.defines), max_spp=args.max_spp, cluster=args.cluster,
-             cache_dir=args.cache, progress=None, noise_floor=args.noise_floor)
+             cache_dir=args.cache, progress=None, noise_floor=args.noise_floor,
+             denoise=args.denoise)
+    print(f"fastest within the budget: {r['answer']}")
     if r["chosen"] is None:
         print(f"no measured setting meets FLIP {args.flip} (reference noise floor "
               f"{r['noise_floor_flip']:.4f}); see {args.out}/tradeoff.csv")
@@ -88,7 +96,8 @@ def _cmd_atlas(args) -> int:
     from mi_displace.evaluate.atlas import atlas
 
     r = atlas(args.out, scenes_dir=args.scenes, max_spp=args.max_spp, cluster=args.cluster,
-              cache_dir=args.cache, progress=None, noise_floor=args.noise_floor)
+              cache_dir=args.cache, progress=None, noise_floor=args.noise_floor,
+              denoise=args.denoise)
     for name, message in r["failures"].items():
         print(f"  {name}: failed ({message})")
     print(f"wrote {args.out}/index.html ({len(r['scenes'])} scenes)")
