@@ -20,7 +20,7 @@ from pathlib import Path
 
 
 def _sweep_options(p) -> None:
-    from mi_displace.cli import DEFAULT_MAX_SPP, _positive_int
+    from mi_displace.cli import DEFAULT_MAX_SPP, _positive_int, denoise_option
 
     p.add_argument("--max-spp", type=_positive_int, default=DEFAULT_MAX_SPP,
                    help=f"most reference samples per pixel (default {DEFAULT_MAX_SPP})")
@@ -31,10 +31,7 @@ def _sweep_options(p) -> None:
                    help="run the points on a Dask cluster: tcp://HOST:PORT, or local:N")
     p.add_argument("--cache", type=Path, default=None, metavar="DIR",
                    help="point cache (default $MI_DISPLACE_CACHE/tradeoff or ~/.cache/mi_displace/tradeoff)")
-    p.add_argument("--denoise", default=None, choices=("fast", "balanced", "high"),
-                   metavar="QUALITY",
-                   help="also measure the path curve denoised by Open Image Denoise at this "
-                        "quality (fast, balanced, high; the 'denoise' extra)")
+    denoise_option(p)
 
 
 def _knobs(p) -> None:

@@ -329,6 +329,11 @@ def crossover(curve: list[dict], error: float) -> tuple[float | None, float | No
     return None, None
 
 
+def default_path_spps(reference_spp: int) -> list[int]:
+    """1, 2, 4, ... samples per pixel up to a quarter of the reference's: the path curve."""
+    return [2 ** k for k in range(int(math.log2(max(1, reference_spp // 4))) + 1)]
+
+
 def path_curve(ref: dict, spps: list[int], seed_base: int = 1 << 20,
                denoise: str | None = None) -> tuple[list[dict], list[dict]]:
     """The reference integrator's own error against the converged reference, per spp: raw,
@@ -502,7 +507,7 @@ def tradeoff(scene_path, knobs: list[Knob] | None, out_dir=None, params: dict | 
                                  [records[i]["image"] for i in good], target_ratio, max_spp,
                                  progress, noise_floor)
     if path_spps is None:
-        path_spps = [2 ** k for k in range(int(math.log2(max(1, ref["spp"] // 4))) + 1)]
+        path_spps = default_path_spps(ref["spp"])
     curve, denoised = path_curve(ref, path_spps, denoise=denoise)
     del ref["scene"]
 
