@@ -6,7 +6,8 @@
 PNG, no external file needed) and ``DIR/atlas.json``:
 
 * a table per scene: every setting's FLIP, relMSE, warm time, whether it is on the Pareto
-  front, and how long the path tracer needs to reach the same error;
+  front, and how long the path tracer needs to reach the same error, raw and (with
+  ``denoise``) denoised;
 * "which setting for which budget": for each time budget (a geometric ladder over the
   measured times), the most accurate setting of each scene that fits it, next to what the
   path tracer reaches in the same time.  On scenes whose knob is ``mode`` (bump, relief,
@@ -86,12 +87,15 @@ def _scene_section(name: str, result: dict, folder: Path) -> str:
         image = folder / f"point_{index}.png"
         thumb = _img(image, 96) if r["ok"] and image.is_file() else ""
         if r["ok"]:
-            cross = (f"{_num(r['path_crossover_s'])} s ({_num(r['path_crossover_spp'])} spp)"
-                     if r["path_crossover_s"] is not None else "not reached")
+            cross = [(f"{_num(r[f'{c}_crossover_s'])} s ({_num(r[f'{c}_crossover_spp'])} spp)"
+                      if r[f"{c}_crossover_s"] is not None else "not reached")
+                     for c in ("path", "denoised")]
+            if not result.get("denoised_curve"):
+                cross[1] = "–"
             cells = [_num(r["flip"], 4), _num(r["relmse"]), _num(r["time_warm_s"]),
-                     _num(r["pareto"]), cross, _num(r["host"])]
+                     _num(r["pareto"]), *cross, _num(r["host"])]
         else:
-            cells = [f'failed: {_num(r["error"])}'] + [""] * 5
+            cells = [f'failed: {_num(r["error"])}'] + [""] * 6
         rows.append(f"<tr><td>{html.escape(r['label'])}</td><td>{thumb}</td>"
                     + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     capped = " (capped)" if result["spp_capped"] else ""
@@ -105,7 +109,8 @@ def _scene_section(name: str, result: dict, folder: Path) -> str:
         f"knobs: {html.escape(', '.join(k['name'] for k in result['knobs']))}</p>\n"
         f"{_img(folder / 'tradeoff.png', 640)}\n"
         "<table><tr><th>setting</th><th>image</th><th>FLIP</th><th>relMSE</th>"
-        "<th>warm time (s)</th><th>Pareto</th><th>path needs</th><th>host</th></tr>\n"
+        "<th>warm time (s)</th><th>Pareto</th><th>path needs</th><th>denoised path needs</th>"
+        "<th>host</th></tr>\n"
         + "\n".join(rows) + "\n</table>\n")
 
 

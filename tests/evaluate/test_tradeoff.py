@@ -196,7 +196,7 @@ def test_denoised_path_curve_and_crossover(sweep, tmp_path):
     """``denoise``: the path curve measured twice (raw and denoised, same seeds), each point's
     crossover against both, and ``tune`` answering with the fastest of the three."""
     result, root = sweep
-    r = tr.tradeoff(SCENE, [tr.parse_knob("resolution=6,24,96")], out_dir=tmp_path,
+    r = tr.tradeoff(SCENE, [tr.parse_knob("resolution=6,24,96")], out_dir=tmp_path / "bumpy",
                     cache_dir=root / "cache", path_spps=[1, 4, 16], denoise="fast", **SWEEP)
     raw, denoised = r["path_curve"], r["denoised_curve"]
     assert [c["spp"] for c in raw] == [c["spp"] for c in denoised] == [1, 4, 16]
@@ -216,8 +216,14 @@ def test_denoised_path_curve_and_crossover(sweep, tmp_path):
                 values = [c[c_key] for c in around]
                 assert min(values) * (1 - 1e-9) <= p[key] <= max(values) * (1 + 1e-9)
             assert "denoised path tracing" in p["denoised_verdict"]
-    header = (tmp_path / "tradeoff.csv").read_text().splitlines()[0].split(",")
+    header = (tmp_path / "bumpy" / "tradeoff.csv").read_text().splitlines()[0].split(",")
     assert {"denoised_crossover_s", "denoised_crossover_spp"} <= set(header)
+    # the atlas: the denoised path's FLIP within each budget, by brute force
+    page = atlas_mod.write_html(tmp_path / "index.html", {"bumpy": r}, tmp_path, {}).read_text()
+    assert "denoised path needs" in page and "denoised path FLIP" in page
+    for row in atlas_mod.budget_table({"bumpy": r}):
+        within = [c["flip"] for c in denoised if c["time_s"] <= row["budget_s"]]
+        assert row["denoised_path_flip"] == (min(within) if within else None)
     budget = max(c["flip"] for c in denoised)  # every curve point meets it
     answer = tr.tune(SCENE, budget, [tr.parse_knob("resolution=6,24,96")], verify=False,
                      cache_dir=root / "cache", path_spps=[1, 4, 16], denoise="fast", **SWEEP)
