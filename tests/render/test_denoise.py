@@ -5,10 +5,13 @@ Independent truths: a reference converged from two seed streams far from the tes
 seeds; the relief region is where that reference has fine detail (its high-pass magnitude),
 found from the reference alone, not from the denoiser.
 """
+import sys
+
 import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
+from mi_displace.core.extras import MissingExtraError
 from mi_displace.core.resources import scene_path
 from mi_displace.evaluate import metrics
 from mi_displace.render import denoise as dn
@@ -82,3 +85,20 @@ def test_denoiser_blurs_mortar_of_true_displacement(variant_llvm):
 def test_bad_quality_named(variant_llvm):
     with pytest.raises(ValueError, match="denoise: quality must be one of fast, balanced, high"):
         dn.check_quality("ultra")
+
+
+def test_missing_pyoidn_is_a_one_line_cli_error(monkeypatch, capsys, tmp_path):
+    """Without the extra, ``--denoise`` stops before anything renders, naming the install line."""
+    from mi_displace import cli
+
+    monkeypatch.setitem(sys.modules, "pyoidn", None)  # as if not installed
+    with pytest.raises(MissingExtraError, match=r"pip install 'mi-displace\[denoise\]'"):
+        dn.check_quality("high")
+    monkeypatch.setattr(scenes, "load", lambda *a, **k: pytest.fail("a scene was loaded"))
+    with pytest.raises(SystemExit) as e:
+        cli.main(["--variant", "llvm_ad_rgb", "tradeoff", str(scene_path("bump_vs_displaced.xml")),
+                  "--denoise", "high", "--out", str(tmp_path)])
+    assert e.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "mi-displace: error: the denoiser needs 'pyoidn', which is not installed: "
+        "pip install 'mi-displace[denoise]'"]
