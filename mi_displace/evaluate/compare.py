@@ -70,6 +70,7 @@ import numpy as np
 from mi_displace.core.io import to_srgb, write_exr
 from mi_displace.core.progress import stage
 from mi_displace.evaluate import metrics
+from mi_displace.render import denoise as dn
 from mi_displace.render import scene as scenes
 
 #: XML parameters set by the protocol itself; ``params`` may not set them.
@@ -392,9 +393,7 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
     if not isinstance(warm_repeats, (int, np.integer)) or warm_repeats < 3:
         raise ValueError(f"warm_repeats: must be an integer >= 3, got {warm_repeats!r}")
     if denoise is not None:
-        from mi_displace.render.denoise import check_quality
-
-        check_quality(denoise)
+        dn.check_quality(denoise)
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"out_dir {str(out_dir)!r} exists and is not a folder")

@@ -70,6 +70,7 @@ from mi_displace.core.progress import log
 from mi_displace.evaluate import compare as cmp
 from mi_displace.evaluate import jobs as jobs_mod
 from mi_displace.evaluate import metrics
+from mi_displace.render import denoise as dn
 from mi_displace.render import scene as scenes
 
 #: Scene comment declaring a knob for ``atlas`` and ``tune``: ``<!-- tradeoff: NAME=V1,V2 -->``.
@@ -345,8 +346,8 @@ def path_curve(ref: dict, spps: list[int], seed_base: int = 1 << 20,
         seed_base: first seed (far from the reference's own seeds 0, 1, 2, ...).
         denoise: OIDN quality (:data:`mi_displace.render.denoise.QUALITIES`): each spp is
             rendered again with albedo and normal AOVs (same seed, so the same noisy colour;
-            after one untimed 1-spp warm-up, as the reference's) and denoised (:func:`mi_displace.render.denoise.render_denoised`); ``None``: no
-            denoised curve.
+            after one untimed 1-spp warm-up, as the reference's) and denoised
+            (:func:`mi_displace.render.denoise.render_denoised`); ``None``: no denoised curve.
 
     Returns:
         ``(raw, denoised)``: ``[{"spp", "time_s" (warm build + render), "render_s", "flip",
@@ -362,8 +363,6 @@ def path_curve(ref: dict, spps: list[int], seed_base: int = 1 << 20,
 
     raw, denoised = [], []
     if denoise is not None:  # warm-up: the AOV integrator's kernels and OIDN's filter
-        from mi_displace.render import denoise as dn
-
         dn.render_denoised(ref["scene"], 1, seed_base - 1, denoise)
     for i, spp in enumerate(spps):
         image, seconds = scenes.render(ref["scene"], spp=spp, seed=seed_base + i)
@@ -452,9 +451,7 @@ def tradeoff(scene_path, knobs: list[Knob] | None, out_dir=None, params: dict | 
                                         and 0 < noise_floor < 1):
         raise ValueError(f"--noise-floor: the target must lie in (0, 1), got {noise_floor!r}")
     if denoise is not None:
-        from mi_displace.render.denoise import check_quality
-
-        check_quality(denoise)
+        dn.check_quality(denoise)
     cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     points = (sweep_points(knobs) if points is None
               else [{name: str(value) for name, value in p.items()} for p in points])

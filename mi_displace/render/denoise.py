@@ -55,8 +55,8 @@ def denoise(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray,
     Returns:
         The denoised linear RGB image, ``(H, W, 3)`` float32.
     """
-    pyoidn = require("pyoidn", "denoise", "the denoiser")
     check_quality(quality)
+    pyoidn = require("pyoidn", "denoise", "the denoiser")
     images = [np.ascontiguousarray(a, dtype=np.float32) for a in (color, albedo, normal)]
     return pyoidn.denoise(*images, hdr=True, clean_aux=False, quality=quality)
 
