@@ -43,6 +43,9 @@ Procedure
    no larger than the noise floor, which is what a consistency scene (DESIGN protocol item 4:
    raster on the reference geometry) must show — such a scene never "converges" and runs to
    ``max_spp``.
+4. Optionally (``denoise``): the reference integrator's own curve at 1, 2, 4, ... spp, raw
+   and denoised by Open Image Denoise (:mod:`mi_displace.render.denoise`), and the time at
+   which each reaches the approximation's FLIP.
 
 Times are wall seconds in this process.  ``reference_time_s`` = warm build + every render
 that went into the final reference image; ``approx_time_warm_s`` = median over the warm rounds
