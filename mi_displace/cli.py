@@ -37,7 +37,7 @@ from pathlib import Path
 
 from mi_displace.core import progress
 from mi_displace.core.cli_args import (DEFAULT_MAX_SPP, QUICK_MAX_SPP, UsageError, define,
-                                       positive_int, seed, showcase_scenes)
+                                       denoise_option, positive_int, seed, showcase_scenes)
 from mi_displace.core.progress import stage
 
 SUMMARY_COLUMNS = (
@@ -113,6 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
     quick_and_max_spp(p)
     p.add_argument("--target-ratio", type=float, default=0.2,
                    help="required noise floor / FLIP ratio (default 0.2)")
+    denoise_option(p)
 
     p = sub.add_parser("showcase", help="compare every scene marked <!-- showcase -->")
     p.add_argument("--out", type=Path, required=True, help="output folder")
@@ -212,13 +213,15 @@ def _cmd_compare(args) -> int:
     from mi_displace.evaluate.compare import compare
 
     r = compare(args.scene, args.out, params=dict(args.defines), max_spp=_max_spp(args),
-                target_ratio=args.target_ratio, progress=None)
+                target_ratio=args.target_ratio, progress=None, denoise=args.denoise)
     capped = ", capped" if r["spp_capped"] else ""
     print(f"{args.scene}: FLIP {r['flip_mean']:.4f} (noise floor {r['noise_floor_flip']:.4f}), "
           f"relMSE {r['relmse']:.4g}, PSNR {_fmt(r['psnr'])} dB, SSIM {r['ssim']:.4f}\n"
           f"reference {r['reference_spp']} spp{capped}: {r['reference_time_s']:.3f} s; "
           f"approximation {r['approx_time_warm_s']:.3f} s warm, {r['approx_time_cold_s']:.3f} s cold; "
           f"speed-up {r['speedup']:.3g}x\nwrote {args.out}/panel.png, metrics.json")
+    if args.denoise:
+        print(f"{r['path_verdict']}\n{r['denoised_verdict']}")
     return 0
 
 

@@ -55,3 +55,11 @@ def showcase_scenes(scenes_dir: Path) -> list[Path]:
     if not found:
         raise UsageError(f"no scene under {str(scenes_dir)!r} is marked <!-- showcase -->")
     return found
+
+
+def denoise_option(p) -> None:
+    """``--denoise QUALITY`` of ``compare`` and the sweeps (:mod:`mi_displace.render.denoise`)."""
+    p.add_argument("--denoise", default=None, choices=("fast", "balanced", "high"),
+                   metavar="QUALITY",
+                   help="also measure the path curve raw and denoised by Open Image Denoise at "
+                        "this quality (fast, balanced, high; the 'denoise' extra)")

@@ -6,7 +6,8 @@
 PNG, no external file needed) and ``DIR/atlas.json``:
 
 * a table per scene: every setting's FLIP, relMSE, warm time, whether it is on the Pareto
-  front, and how long the path tracer needs to reach the same error;
+  front, and how long the path tracer needs to reach the same error, raw and (with
+  ``denoise``) denoised;
 * "which setting for which budget": for each time budget (a geometric ladder over the
   measured times), the most accurate setting of each scene that fits it, next to what the
   path tracer reaches in the same time.  On scenes whose knob is ``mode`` (bump, relief,
@@ -45,7 +46,8 @@ def budget_table(results: dict[str, dict], budgets=BUDGETS_S) -> list[dict]:
     """For each scene and budget: the most accurate setting within it, and the path tracer's.
 
     Returns:
-        ``[{"scene", "budget_s", "setting" (label or None), "flip", "time_s", "path_flip"}]``.
+        ``[{"scene", "budget_s", "setting" (label or None), "flip", "time_s", "path_flip",
+        "denoised_path_flip"}]``.
     """
     rows = []
     for name, result in results.items():
@@ -57,7 +59,9 @@ def budget_table(results: dict[str, dict], budgets=BUDGETS_S) -> list[dict]:
                          "setting": best["label"] if best else None,
                          "flip": best["flip"] if best else None,
                          "time_s": best["time_warm_s"] if best else None,
-                         "path_flip": path_flip_at(result["path_curve"], budget)})
+                         "path_flip": path_flip_at(result["path_curve"], budget),
+                         "denoised_path_flip": path_flip_at(result.get("denoised_curve") or [],
+                                                            budget)})
     return rows
 
 
@@ -83,12 +87,15 @@ def _scene_section(name: str, result: dict, folder: Path) -> str:
         image = folder / f"point_{index}.png"
         thumb = _img(image, 96) if r["ok"] and image.is_file() else ""
         if r["ok"]:
-            cross = (f"{_num(r['path_crossover_s'])} s ({_num(r['path_crossover_spp'])} spp)"
-                     if r["path_crossover_s"] is not None else "not reached")
+            cross = [(f"{_num(r[f'{c}_crossover_s'])} s ({_num(r[f'{c}_crossover_spp'])} spp)"
+                      if r[f"{c}_crossover_s"] is not None else "not reached")
+                     for c in ("path", "denoised")]
+            if not result.get("denoised_curve"):
+                cross[1] = "–"
             cells = [_num(r["flip"], 4), _num(r["relmse"]), _num(r["time_warm_s"]),
-                     _num(r["pareto"]), cross, _num(r["host"])]
+                     _num(r["pareto"]), *cross, _num(r["host"])]
         else:
-            cells = [f'failed: {_num(r["error"])}'] + [""] * 5
+            cells = [f'failed: {_num(r["error"])}'] + [""] * 6
         rows.append(f"<tr><td>{html.escape(r['label'])}</td><td>{thumb}</td>"
                     + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
     capped = " (capped)" if result["spp_capped"] else ""
@@ -102,7 +109,8 @@ def _scene_section(name: str, result: dict, folder: Path) -> str:
         f"knobs: {html.escape(', '.join(k['name'] for k in result['knobs']))}</p>\n"
         f"{_img(folder / 'tradeoff.png', 640)}\n"
         "<table><tr><th>setting</th><th>image</th><th>FLIP</th><th>relMSE</th>"
-        "<th>warm time (s)</th><th>Pareto</th><th>path needs</th><th>host</th></tr>\n"
+        "<th>warm time (s)</th><th>Pareto</th><th>path needs</th><th>denoised path needs</th>"
+        "<th>host</th></tr>\n"
         + "\n".join(rows) + "\n</table>\n")
 
 
@@ -112,7 +120,8 @@ def write_html(path: Path, results: dict[str, dict], out_dir: Path, failures: di
     budget_rows = "\n".join(
         f"<tr><td>{html.escape(r['scene'])}</td><td>{_num(r['budget_s'])}</td>"
         f"<td>{_num(r['setting'])}</td><td>{_num(r['flip'], 4)}</td><td>{_num(r['time_s'])}</td>"
-        f"<td>{_num(r['path_flip'], 4)}</td></tr>" for r in budget)
+        f"<td>{_num(r['path_flip'], 4)}</td><td>{_num(r['denoised_path_flip'], 4)}</td></tr>"
+        for r in budget)
     sections = "\n".join(_scene_section(name, result, out_dir / name)
                          for name, result in results.items())
     failed = "".join(f"<li>{html.escape(n)}: {html.escape(e)}</li>" for n, e in failures.items())
@@ -130,9 +139,10 @@ its folder.  Timings are wall seconds on the machine that rendered each point.</
 <p>{toc}</p>
 <h2>Which setting for which budget</h2>
 <p>The most accurate measured setting within each time budget per frame, and the FLIP the
-path tracer reaches in the same time (– : nothing fits).</p>
+path tracer reaches in the same time, raw and denoised (– : nothing fits, or no denoised
+curve: <code>--denoise</code>).</p>
 <table><tr><th>scene</th><th>budget (s)</th><th>setting</th><th>FLIP</th><th>time (s)</th>
-<th>path FLIP</th></tr>
+<th>path FLIP</th><th>denoised path FLIP</th></tr>
 {budget_rows}
 </table>
 {f"<h2>Failed scenes</h2><ul>{failed}</ul>" if failed else ""}
@@ -145,12 +155,13 @@ path tracer reaches in the same time (– : nothing fits).</p>
 
 def atlas(out_dir, scenes_dir=None, max_spp: int = 1024, cluster: str | None = None,
           cache_dir=None, progress: bool | None = False, warm_repeats: int = 3,
-          noise_floor: float | None = None) -> dict:
+          noise_floor: float | None = None, denoise: str | None = None) -> dict:
     """Sweep every atlas scene and write ``index.html`` and ``atlas.json`` (module docstring).
 
     Each scene's reference doubles its spp until its two-seed noise floor is at most
     ``noise_floor`` (or a fifth of the sweep's smallest error), capped at ``max_spp``: the
-    reference spp is chosen per scene.
+    reference spp is chosen per scene.  ``denoise``: OIDN quality of the denoised path
+    curve measured beside the raw one (:func:`tradeoff.tradeoff`).
 
     Returns:
         ``{"scenes": {name: tradeoff result}, "failures": {name: message}, "budgets": rows}``.
@@ -167,7 +178,7 @@ def atlas(out_dir, scenes_dir=None, max_spp: int = 1024, cluster: str | None = N
             results[name] = tr.tradeoff(path, tr.declared_knobs(path), out_dir=out_dir / name,
                                         max_spp=max_spp, cluster=cluster, cache_dir=cache_dir,
                                         progress=progress, warm_repeats=warm_repeats,
-                                        noise_floor=noise_floor)
+                                        noise_floor=noise_floor, denoise=denoise)
         except (ValueError, FileNotFoundError) as e:  # one broken scene must not hide the rest
             failures[name] = " ".join(str(e).split())
     write_html(out_dir / "index.html", results, out_dir, failures)

@@ -20,7 +20,7 @@ from pathlib import Path
 
 
 def _sweep_options(p) -> None:
-    from mi_displace.core.cli_args import DEFAULT_MAX_SPP, positive_int
+    from mi_displace.core.cli_args import DEFAULT_MAX_SPP, denoise_option, positive_int
 
     p.add_argument("--max-spp", type=positive_int, default=DEFAULT_MAX_SPP,
                    help=f"most reference samples per pixel (default {DEFAULT_MAX_SPP})")
@@ -31,6 +31,7 @@ def _sweep_options(p) -> None:
                    help="run the points on a Dask cluster: tcp://HOST:PORT, or local:N")
     p.add_argument("--cache", type=Path, default=None, metavar="DIR",
                    help="point cache (default $MI_DISPLACE_CACHE/tradeoff or ~/.cache/mi_displace/tradeoff)")
+    denoise_option(p)
 
 
 def _knobs(p) -> None:
@@ -51,7 +52,7 @@ def _cmd_tradeoff(args) -> int:
 
     r = tradeoff(args.scene, _parsed_knobs(args), out_dir=args.out, params=dict(args.defines),
                  max_spp=args.max_spp, cluster=args.cluster, cache_dir=args.cache, progress=None,
-                 noise_floor=args.noise_floor)
+                 noise_floor=args.noise_floor, denoise=args.denoise)
     print(f"reference {r['reference_spp']} spp{' (capped)' if r['spp_capped'] else ''}, "
           f"noise floor FLIP {r['noise_floor_flip']:.4f}")
     for p in r["points"]:
@@ -62,6 +63,8 @@ def _cmd_tradeoff(args) -> int:
                  else "path does not reach it within the curve")
         print(f"  {p['label']}: FLIP {p['flip']:.4f}, {p['time_warm_s']:.3g} s warm"
               f"{' (Pareto)' if p['pareto'] else ''}; {cross}")
+        if p["denoised_verdict"]:
+            print(f"    {p['denoised_verdict']}")
     print(f"wrote {args.out}/tradeoff.csv, tradeoff.json, tradeoff.png")
     return 0
 
@@ -71,7 +74,9 @@ def _cmd_tune(args) -> int:
 
     r = tune(args.scene, args.flip, _parsed_knobs(args), out_dir=args.out,
              params=dict(args.defines), max_spp=args.max_spp, cluster=args.cluster,
-             cache_dir=args.cache, progress=None, noise_floor=args.noise_floor)
+             cache_dir=args.cache, progress=None, noise_floor=args.noise_floor,
+             denoise=args.denoise)
+    print(f"fastest within the budget: {r['answer']}")
     if r["chosen"] is None:
         print(f"no measured setting meets FLIP {args.flip} (reference noise floor "
               f"{r['noise_floor_flip']:.4f}); see {args.out}/tradeoff.csv")
@@ -88,7 +93,8 @@ def _cmd_atlas(args) -> int:
     from mi_displace.evaluate.atlas import atlas
 
     r = atlas(args.out, scenes_dir=args.scenes, max_spp=args.max_spp, cluster=args.cluster,
-              cache_dir=args.cache, progress=None, noise_floor=args.noise_floor)
+              cache_dir=args.cache, progress=None, noise_floor=args.noise_floor,
+              denoise=args.denoise)
     for name, message in r["failures"].items():
         print(f"  {name}: failed ({message})")
     print(f"wrote {args.out}/index.html ({len(r['scenes'])} scenes)")

@@ -43,6 +43,9 @@ Procedure
    no larger than the noise floor, which is what a consistency scene (DESIGN protocol item 4:
    raster on the reference geometry) must show — such a scene never "converges" and runs to
    ``max_spp``.
+4. Optionally (``denoise``): the reference integrator's own curve at 1, 2, 4, ... spp, raw
+   and denoised by Open Image Denoise (:mod:`mi_displace.render.denoise`), and the time at
+   which each reaches the approximation's FLIP.
 
 Times are wall seconds in this process.  ``reference_time_s`` = warm build + every render
 that went into the final reference image; ``approx_time_warm_s`` = median over the warm rounds
@@ -70,6 +73,7 @@ import numpy as np
 from mi_displace.core.io import to_srgb, write_exr
 from mi_displace.core.progress import stage
 from mi_displace.evaluate import metrics
+from mi_displace.render import denoise as dn
 from mi_displace.render import scene as scenes
 
 #: XML parameters set by the protocol itself; ``params`` may not set them.
@@ -359,7 +363,7 @@ def converge_reference(scene_path, xml_params: dict, integrator: str, approximat
 
 def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024,
             target_ratio: float = 0.2, warm_repeats: int = 3,
-            progress: bool | None = False) -> dict:
+            progress: bool | None = False, denoise: str | None = None) -> dict:
     """Run the comparison protocol (module docstring) on one scene and write its outputs.
 
     Args:
@@ -372,9 +376,16 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
         progress: a line per stage with its time (approximation rounds, reference build,
             each reference round with its noise floor and FLIP) and bars over long
             multi-pass renders; ``None``: only on a terminal (:mod:`mi_displace.core.progress`).
+        denoise: OIDN quality (``"fast"``, ``"balanced"``, ``"high"``; the ``denoise`` extra):
+            also measure the reference integrator's own curve at 1, 2, 4, ... spp (up to a
+            quarter of the reference's), raw and denoised
+            (:func:`mi_displace.evaluate.tradeoff.path_curve`), and where each reaches the
+            approximation's FLIP; ``None``: neither curve.
 
     Returns:
-        The metrics dict also written to ``out_dir/metrics.json`` (keys: :data:`METRIC_KEYS`).
+        The metrics dict also written to ``out_dir/metrics.json`` (keys: :data:`METRIC_KEYS`;
+        with ``denoise`` also ``path_curve``, ``denoised_curve``, ``path_crossover_s``,
+        ``denoised_crossover_s`` and the verdicts ``path_verdict``, ``denoised_verdict``).
     """
     scene_path = Path(scene_path)
     settings = protocol_settings(scene_path, params)
@@ -384,6 +395,8 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
         raise ValueError(f"target_ratio: must lie in (0, 1], got {target_ratio!r}")
     if not isinstance(warm_repeats, (int, np.integer)) or warm_repeats < 3:
         raise ValueError(f"warm_repeats: must be an integer >= 3, got {warm_repeats!r}")
+    if denoise is not None:
+        dn.check_quality(denoise)
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"out_dir {str(out_dir)!r} exists and is not a folder")
@@ -400,6 +413,7 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
     ref_int = settings["reference_integrator"]
     ref = converge_reference(scene_path, xml_params, ref_int, [approx], target_ratio, max_spp,
                              progress)
+    curves = _path_curves(ref, denoise, measured["time_warm_s"]) if denoise is not None else {}
     del ref["scene"]
     reference, noise_floor, flip_mean = ref["reference"], ref["noise_floor_flip"], ref["flips"][0]
     error_map = ref["error_maps"][0]
@@ -448,12 +462,28 @@ def compare(scene_path, out_dir, params: dict | None = None, max_spp: int = 1024
                      for shape in shapes for w in shape.get("warnings", [])],
         "mitsuba_version": mi.__version__,
         "drjit_version": dr.__version__,
+        **curves,
     }
     write_exr(out_dir / "reference.exr", reference)
     write_exr(out_dir / "approximation.exr", approx)
     write_panel(out_dir / "panel.png", reference, approx, error_map, info)
     with open(out_dir / "metrics.json", "w") as f:
         json.dump(_finite_or_none(info), f, indent=2, allow_nan=False)
+    return info
+
+
+def _path_curves(ref: dict, denoise: str, approx_time_s: float) -> dict:
+    """The reference integrator's raw and denoised curves against ``ref`` and where each
+    reaches the approximation's FLIP (``ref["flips"][0]``), for :func:`compare`."""
+    from mi_displace.evaluate import tradeoff as tr  # tradeoff builds on this module
+
+    raw, denoised = tr.path_curve(ref, tr.default_path_spps(ref["spp"]), denoise=denoise)
+    info = {"path_curve": raw, "denoised_curve": denoised, "denoise": denoise}
+    for name, curve, competitor in (("path", raw, "path tracing"),
+                                    ("denoised", denoised, "denoised path tracing")):
+        seconds, spp = tr.crossover(curve, ref["flips"][0])
+        info.update({f"{name}_crossover_s": seconds, f"{name}_crossover_spp": spp,
+                     f"{name}_verdict": tr.crossover_verdict(approx_time_s, seconds, competitor)})
     return info
 
 

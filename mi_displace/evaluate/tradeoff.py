@@ -14,8 +14,12 @@
   reference and its warm time;
 * optionally ``inspect(scene) -> dict``: measurements of the loaded approximation scene
   itself (a table's reconstruction error, a normal's angle error, ...), per point;
+* with ``denoise``: the same curve again, each image denoised by Open Image Denoise
+  (:mod:`mi_displace.render.denoise`, the denoiser's time counted in the point's time) and
+  measured against the same reference like any approximation;
 * the crossover: how long the path tracer needs to reach each point's error (log-log
-  interpolation along its curve; ``None`` when it does not get there within the curve).
+  interpolation along its curve; ``None`` when it does not get there within the curve),
+  against the raw curve and against the denoised one, with a verdict sentence for each.
 
 Knobs
 -----
@@ -66,6 +70,7 @@ from mi_displace.core.progress import log
 from mi_displace.evaluate import compare as cmp
 from mi_displace.evaluate import jobs as jobs_mod
 from mi_displace.evaluate import metrics
+from mi_displace.render import denoise as dn
 from mi_displace.render import scene as scenes
 
 #: Scene comment declaring a knob for ``atlas`` and ``tune``: ``<!-- tradeoff: NAME=V1,V2 -->``.
@@ -73,7 +78,7 @@ DECLARED_KNOB = re.compile(r"<!--\s*tradeoff:\s*([^>]*?)\s*-->")
 #: CSV columns (and the per-point keys of ``tradeoff.json``).
 CSV_COLUMNS = ("label", "ok", "flip", "relmse", "psnr", "time_warm_s", "time_cold_s",
                "build_s", "build_cold_s", "render_warm_s", "pareto", "path_crossover_s", "path_crossover_spp",
-               "host", "cached", "error")
+               "denoised_crossover_s", "denoised_crossover_spp", "host", "cached", "error")
 
 
 @dataclass(frozen=True)
@@ -325,25 +330,64 @@ def crossover(curve: list[dict], error: float) -> tuple[float | None, float | No
     return None, None
 
 
-def path_curve(ref: dict, spps: list[int], seed_base: int = 1 << 20) -> list[dict]:
-    """The reference integrator's own error against the converged reference, per spp.
+def default_path_spps(reference_spp: int) -> list[int]:
+    """1, 2, 4, ... samples per pixel up to a quarter of the reference's: the path curve."""
+    return [2 ** k for k in range(int(math.log2(max(1, reference_spp // 4))) + 1)]
+
+
+def path_curve(ref: dict, spps: list[int], seed_base: int = 1 << 20,
+               denoise: str | None = None) -> tuple[list[dict], list[dict]]:
+    """The reference integrator's own error against the converged reference, per spp: raw,
+    and (``denoise``) denoised.
 
     Args:
         ref: :func:`compare.converge_reference`'s result (its loaded ``scene`` is rendered).
         spps: samples per pixel to render (each an independent image, fresh seeds).
         seed_base: first seed (far from the reference's own seeds 0, 1, 2, ...).
+        denoise: OIDN quality (:data:`mi_displace.render.denoise.QUALITIES`): each spp is
+            rendered again with albedo and normal AOVs (same seed, so the same noisy colour;
+            after one untimed 1-spp warm-up, as the reference's) and denoised
+            (:func:`mi_displace.render.denoise.render_denoised`); ``None``: no denoised curve.
 
     Returns:
-        ``[{"spp", "time_s" (warm build + render), "render_s", "flip", "relmse"}]``.
+        ``(raw, denoised)``: ``[{"spp", "time_s" (warm build + render), "render_s", "flip",
+        "relmse"}]``; the denoised points' ``time_s`` also counts the AOV render and the
+        denoiser (``denoise_s``); ``denoised`` is ``[]`` without ``denoise``.
     """
-    curve = []
+    def point(spp, image, render_s, what, **extra):
+        metrics.assert_finite(image, f"{what} image at {spp} spp")
+        flip, _ = metrics.flip(ref["reference"], image)
+        return {"spp": spp, "time_s": ref["build_s"] + render_s + extra.get("denoise_s", 0.0),
+                "render_s": render_s, "flip": flip,
+                "relmse": metrics.relmse(ref["reference"], image), **extra}
+
+    raw, denoised = [], []
+    if denoise is not None:  # warm-up: the AOV integrator's kernels and OIDN's filter
+        dn.render_denoised(ref["scene"], 1, seed_base - 1, denoise)
     for i, spp in enumerate(spps):
         image, seconds = scenes.render(ref["scene"], spp=spp, seed=seed_base + i)
-        metrics.assert_finite(image, f"path-curve image at {spp} spp")
-        flip, _ = metrics.flip(ref["reference"], image)
-        curve.append({"spp": spp, "time_s": ref["build_s"] + seconds, "render_s": seconds,
-                      "flip": flip, "relmse": metrics.relmse(ref["reference"], image)})
-    return curve
+        raw.append(point(spp, image, seconds, "path-curve"))
+        if denoise is not None:
+            image, _, times = dn.render_denoised(ref["scene"], spp, seed_base + i, denoise)
+            denoised.append(point(spp, image, times["render_s"], "denoised path-curve",
+                                  denoise_s=times["denoise_s"], quality=denoise))
+    return raw, denoised
+
+
+def crossover_verdict(time_s: float, crossover_s: float | None, competitor: str) -> str:
+    """One sentence: below which time a point beats ``competitor`` (a path curve).
+
+    Args:
+        time_s: the point's warm time (s).
+        crossover_s: when the competitor reaches the point's FLIP (:func:`crossover`), or
+            ``None`` if its curve never does.
+        competitor: its name, e.g. ``"denoised path tracing"``.
+    """
+    if crossover_s is None:
+        return f"{competitor} does not reach this error within its curve: this technique wins"
+    if crossover_s <= time_s:
+        return f"{competitor} reaches this error sooner ({crossover_s:.3g} s): path trace"
+    return (f"below {crossover_s:.3g} s this technique beats {competitor}; above, path trace")
 
 
 def _log_point(points: list[dict], index: int, result: str, progress: bool | None) -> None:
@@ -356,7 +400,8 @@ def tradeoff(scene_path, knobs: list[Knob] | None, out_dir=None, params: dict | 
              max_spp: int = 1024, target_ratio: float = 0.2, warm_repeats: int = 3,
              cluster: str | None = None, cache_dir=None, progress: bool | None = False,
              path_spps: list[int] | None = None, noise_floor: float | None = None,
-             points: list[dict] | None = None, inspect=None) -> dict:
+             points: list[dict] | None = None, inspect=None,
+             denoise: str | None = None) -> dict:
     """Sweep ``knobs`` on a comparison scene (module docstring); write CSV, JSON and a plot.
 
     Args:
@@ -378,10 +423,13 @@ def tradeoff(scene_path, knobs: list[Knob] | None, out_dir=None, params: dict | 
         points: explicit points instead of the product (module docstring).
         inspect: a module-level ``inspect(scene) -> dict`` run on each point's loaded
             approximation scene (on the worker; its name is part of the cache key).
+        denoise: OIDN quality of a second, denoised path curve (``"fast"``, ``"balanced"``,
+            ``"high"``; ``None``: the raw curve only); needs the ``denoise`` extra.
 
     Returns:
         The dict written to ``tradeoff.json``: ``points`` (one dict per point: ``point``,
-        ``label``, :data:`CSV_COLUMNS`, ``build_stats``, ``inspected``), ``path_curve``,
+        ``label``, :data:`CSV_COLUMNS`, ``build_stats``, ``inspected``, ``path_verdict``,
+        ``denoised_verdict``), ``path_curve``, ``denoised_curve``, ``denoise``,
         ``noise_floor_flip``, ``reference_spp``, ``spp_capped`` and the settings.
     """
     import mitsuba as mi
@@ -402,6 +450,8 @@ def tradeoff(scene_path, knobs: list[Knob] | None, out_dir=None, params: dict | 
     if noise_floor is not None and not (isinstance(noise_floor, (int, float))
                                         and 0 < noise_floor < 1):
         raise ValueError(f"--noise-floor: the target must lie in (0, 1), got {noise_floor!r}")
+    if denoise is not None:
+        dn.check_quality(denoise)
     cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     points = (sweep_points(knobs) if points is None
               else [{name: str(value) for name, value in p.items()} for p in points])
@@ -454,8 +504,8 @@ def tradeoff(scene_path, knobs: list[Knob] | None, out_dir=None, params: dict | 
                                  [records[i]["image"] for i in good], target_ratio, max_spp,
                                  progress, noise_floor)
     if path_spps is None:
-        path_spps = [2 ** k for k in range(int(math.log2(max(1, ref["spp"] // 4))) + 1)]
-    curve = path_curve(ref, path_spps)
+        path_spps = default_path_spps(ref["spp"])
+    curve, denoised = path_curve(ref, path_spps, denoise=denoise)
     del ref["scene"]
 
     # 4. metrics per point, front, crossover
@@ -472,11 +522,18 @@ def tradeoff(scene_path, knobs: list[Knob] | None, out_dir=None, params: dict | 
                "error": record.get("error")}
         if record["ok"]:
             t, s = crossover(curve, record["flip"])
+            td, sd = crossover(denoised, record["flip"])
             row.update({k: record.get(k) for k in ("flip", "relmse", "psnr", "time_warm_s",
                                                    "time_cold_s", "build_s", "build_cold_s",
                                                    "render_warm_s")},
                        pareto=front[good.index(index)], path_crossover_s=t,
-                       path_crossover_spp=s, build_stats=record.get("build_stats"),
+                       path_crossover_spp=s, denoised_crossover_s=td, denoised_crossover_spp=sd,
+                       path_verdict=(crossover_verdict(record["time_warm_s"], t, "path tracing")
+                                     if curve else None),
+                       denoised_verdict=(crossover_verdict(record["time_warm_s"], td,
+                                                           "denoised path tracing")
+                                         if denoised else None),
+                       build_stats=record.get("build_stats"),
                        inspected=record.get("inspected"), measured_at=record.get("measured_at"))
         rows.append(row)
     result = {
@@ -490,7 +547,7 @@ def tradeoff(scene_path, knobs: list[Knob] | None, out_dir=None, params: dict | 
         "target_ratio": target_ratio, "noise_floor_target": noise_floor,
         "noise_floor_flip": ref["noise_floor_flip"], "inspect": _callable_name(inspect),
         "reference_time_s": ref["build_s"] + ref["render_s"],
-        "points": rows, "path_curve": curve,
+        "points": rows, "path_curve": curve, "denoised_curve": denoised, "denoise": denoise,
     }
     if out_dir is not None:
         write_outputs(out_dir, result, ref["reference"], {i: records[i]["image"] for i in good})
@@ -547,7 +604,12 @@ def plot(result: dict, path=None, ax=None, title: str | None = None) -> Path | N
     if curve:
         ax.plot([p["time_s"] for p in curve], [p["flip"] for p in curve], "o-", color="0.55",
                 label=f"{result['reference_integrator']} (error vs spp)")
-    for p in curve:
+    denoised = result.get("denoised_curve") or []
+    if denoised:
+        ax.plot([p["time_s"] for p in denoised], [p["flip"] for p in denoised], "s--",
+                color="0.3", label=f"{result['reference_integrator']} + OIDN "
+                                   f"{result['denoise']} (error vs spp)")
+    for p in (*curve, *denoised):
         ax.annotate(f"{p['spp']}", (p["time_s"], p["flip"]), fontsize=6, color="0.4",
                     xytext=(3, 3), textcoords="offset points")
     ok = [r for r in result["points"] if r["ok"]]
@@ -636,8 +698,12 @@ def tune(scene_path, flip_budget: float, knobs: list[Knob] | None = None, out_di
         dict with ``budget``, ``chosen`` (the point, ``None`` if none meets the budget),
         ``defines`` (``-D name=value`` strings), ``sweep_flip`` / ``sweep_time_s`` of the
         chosen point, ``verified_flip`` / ``verified_time_s``, ``meets_budget``,
-        ``default_time_s`` / ``default_flip`` and ``speedup_vs_default``; also written to
-        ``out_dir/tune.json`` with the sweep's outputs.
+        ``default_time_s`` / ``default_flip`` and ``speedup_vs_default``; ``path`` and
+        ``denoised_path``: the fastest measured point of the raw / denoised path curve
+        within the budget (``None``: none, or no such curve); ``answer``: one sentence
+        naming the fastest of the three (the approximation's sweep time against the path
+        points' times, all measured in this run). Also written to ``out_dir/tune.json`` with
+        the sweep's outputs.
     """
     if not isinstance(flip_budget, (int, float)) or not 0 < flip_budget < 1:
         raise ValueError(f"--flip: the budget must lie in (0, 1), got {flip_budget!r}")
@@ -654,6 +720,18 @@ def tune(scene_path, flip_budget: float, knobs: list[Knob] | None = None, out_di
         if verify:
             answer.update(_verify(scene_path, best["point"], knobs, params, sweep))
             answer["meets_budget"] = answer["verified_flip"] <= flip_budget
+    options = [(answer.get("sweep_time_s"), "approximation:" + " ".join(answer["defines"]))]
+    for name, key in (("path", "path_curve"), ("denoised_path", "denoised_curve")):
+        reach = [p for p in result[key] if p["flip"] <= flip_budget]
+        answer[name] = min(reach, key=lambda p: p["time_s"]) if reach else None
+        if reach:
+            with_denoiser = (f" with the denoiser (OIDN {result['denoise']})"
+                             if name == "denoised_path" else "")
+            options.append((answer[name]["time_s"],
+                            f"path trace at {answer[name]['spp']} spp{with_denoiser}"))
+    options = [(t, text) for t, text in options if t is not None]
+    answer["answer"] = (min(options)[1] + f" ({min(options)[0]:.3g} s)" if options
+                        else "nothing measured meets the budget")
     if out_dir is not None:
         with open(Path(out_dir) / "tune.json", "w") as f:
             json.dump(cmp._finite_or_none(answer), f, indent=2, allow_nan=False)

@@ -203,7 +203,7 @@ def _pass_seed(seed: int, index: int) -> int:
 
 
 def render(scene, spp: int | None = None, seed: int = 0, sensor: int = 0,
-           progress: bool | None = False) -> tuple[np.ndarray, float]:
+           progress: bool | None = False, integrator=None) -> tuple[np.ndarray, float]:
     """Render a scene to a linear float32 ``(H, W, 3)`` NumPy image and time it.
 
     Requests of more than :data:`MAX_SAMPLES_PER_PASS` samples are split into passes of
@@ -219,6 +219,9 @@ def render(scene, spp: int | None = None, seed: int = 0, sensor: int = 0,
         sensor: sensor index.
         progress: show a progress bar when there are several passes (``None``: on a
             terminal, see :mod:`mi_displace.core.progress`).
+        integrator: an ``mi.Integrator`` to render with instead of the scene's (e.g. an
+            ``aov`` integrator wrapping it); then every channel the film develops is kept,
+            ``(H, W, C)``, RGB first and the integrator's AOVs after it.
 
     Returns:
         ``(image, seconds)``: wall seconds of the whole render including the transfer to NumPy.
@@ -244,10 +247,12 @@ def render(scene, spp: int | None = None, seed: int = 0, sensor: int = 0,
     image = None
     for index, count in enumerate(passes):
         try:
-            rendered = mi.render(scene, spp=count, seed=_pass_seed(int(seed), index), sensor=sensor)
+            rendered = mi.render(scene, spp=count, seed=_pass_seed(int(seed), index), sensor=sensor,
+                                 integrator=integrator)
         except RuntimeError as e:
             raise _user_error_inside(e) from None
-        part = np.asarray(rendered, dtype=np.float32)[..., :3] * (count / total)
+        part = np.asarray(rendered, dtype=np.float32)
+        part = (part if integrator is not None else part[..., :3]) * (count / total)
         image = part if image is None else image + part
         bar.update(count)
     seconds = time.perf_counter() - start

@@ -82,6 +82,27 @@ def test_compare_caps_the_reference_spp(variant, tmp_path):
     assert result["reference_spp"] == 4 and len(result["reference_rounds"]) == 1
 
 
+def test_compare_with_the_denoised_path_curve(variant_llvm, tmp_path):
+    """``denoise``: the reference integrator's curve raw and denoised against the reference,
+    and where each reaches the approximation's FLIP (by brute force along the curve)."""
+    result = cmp.compare(SCENE, tmp_path, max_spp=64, denoise="fast")
+    raw, denoised = result["path_curve"], result["denoised_curve"]
+    spps = [2 ** k for k in range(int(math.log2(result["reference_spp"] // 4)) + 1)]
+    assert [c["spp"] for c in raw] == [c["spp"] for c in denoised] == spps
+    for name, curve in (("path", raw), ("denoised", denoised)):
+        assert all(math.isfinite(c["flip"]) and 0 < c["flip"] < 1 for c in curve)
+        reached = [i for i, c in enumerate(curve) if c["flip"] <= result["flip_mean"]]
+        if not reached:
+            assert result[f"{name}_crossover_s"] is None
+            continue
+        around = curve[max(0, reached[0] - 1):reached[0] + 1]
+        times = [c["time_s"] for c in around]
+        assert min(times) * (1 - 1e-9) <= result[f"{name}_crossover_s"] <= max(times) * (1 + 1e-9)
+    assert "denoised path tracing" in result["denoised_verdict"]
+    saved = json.loads((tmp_path / "metrics.json").read_text())
+    assert [c["flip"] for c in saved["denoised_curve"]] == pytest.approx([c["flip"] for c in denoised])
+
+
 def test_protocol_settings_from_xml_defaults_and_params():
     settings = cmp.protocol_settings(SCENE, {"res": 16, "approximation_spp": 2})
     assert settings == {"xml_params": {"res": "16"}, "reference_integrator": "path",
@@ -99,6 +120,8 @@ def test_bad_input_fails_before_rendering(tmp_path, no_render):
         cmp.compare(SCENE, tmp_path / "out", max_spp=1)
     with pytest.raises(ValueError, match="target_ratio"):
         cmp.compare(SCENE, tmp_path / "out", target_ratio=0.0)
+    with pytest.raises(ValueError, match="denoise: quality"):
+        cmp.compare(SCENE, tmp_path / "out", denoise="max")
     with pytest.raises(ValueError, match="approximation_spp"):
         cmp.compare(SCENE, tmp_path / "out", params={"approximation_spp": "many"})
     broken = tmp_path / "broken.xml"

@@ -162,6 +162,8 @@ def test_unknown_knob_refused_before_rendering(variant_llvm, monkeypatch, tmp_pa
             tr.parse_knob(text)
     with pytest.raises(ValueError, match="cluster"):
         tr.tradeoff(SCENE, [tr.parse_knob("resolution=8")], cache_dir=tmp_path, cluster="local:0")
+    with pytest.raises(ValueError, match="denoise: quality"):
+        tr.tradeoff(SCENE, [tr.parse_knob("resolution=8")], cache_dir=tmp_path, denoise="best")
 
 
 def test_traverse_knob(variant_llvm, tmp_path):
@@ -188,6 +190,50 @@ def test_tune_picks_cheapest_within_budget(sweep, tmp_path):
     none = tr.tune(SCENE, 1e-6, [tr.parse_knob("resolution=6")], cache_dir=root / "cache",
                    **SWEEP)
     assert none["chosen"] is None and none["defines"] == []
+
+
+def test_denoised_path_curve_and_crossover(sweep, tmp_path):
+    """``denoise``: the path curve measured twice (raw and denoised, same seeds), each point's
+    crossover against both, and ``tune`` answering with the fastest of the three."""
+    result, root = sweep
+    r = tr.tradeoff(SCENE, [tr.parse_knob("resolution=6,24,96")], out_dir=tmp_path / "bumpy",
+                    cache_dir=root / "cache", path_spps=[1, 4, 16], denoise="fast", **SWEEP)
+    raw, denoised = r["path_curve"], r["denoised_curve"]
+    assert [c["spp"] for c in raw] == [c["spp"] for c in denoised] == [1, 4, 16]
+    build = raw[0]["time_s"] - raw[0]["render_s"]
+    for c in denoised:  # the denoiser's time is part of the point's time
+        assert c["denoise_s"] > 0 and math.isfinite(c["flip"]) and 0 < c["flip"] < 1
+        assert c["time_s"] == pytest.approx(build + c["render_s"] + c["denoise_s"])
+    for p in r["points"]:  # the denoised crossover by brute force along the curve
+        reached = [c for c in denoised if c["flip"] <= p["flip"]]
+        if not reached:
+            assert p["denoised_crossover_s"] is None
+            assert "does not reach" in p["denoised_verdict"]
+        else:
+            i = denoised.index(reached[0])  # interpolated between it and the point before
+            around = denoised[max(0, i - 1):i + 1]
+            for key, c_key in (("denoised_crossover_s", "time_s"), ("denoised_crossover_spp", "spp")):
+                values = [c[c_key] for c in around]
+                assert min(values) * (1 - 1e-9) <= p[key] <= max(values) * (1 + 1e-9)
+            assert "denoised path tracing" in p["denoised_verdict"]
+    header = (tmp_path / "bumpy" / "tradeoff.csv").read_text().splitlines()[0].split(",")
+    assert {"denoised_crossover_s", "denoised_crossover_spp"} <= set(header)
+    # the atlas: the denoised path's FLIP within each budget, by brute force
+    page = atlas_mod.write_html(tmp_path / "index.html", {"bumpy": r}, tmp_path, {}).read_text()
+    assert "denoised path needs" in page and "denoised path FLIP" in page
+    for row in atlas_mod.budget_table({"bumpy": r}):
+        within = [c["flip"] for c in denoised if c["time_s"] <= row["budget_s"]]
+        assert row["denoised_path_flip"] == (min(within) if within else None)
+    budget = max(c["flip"] for c in denoised)  # every curve point meets it
+    answer = tr.tune(SCENE, budget, [tr.parse_knob("resolution=6,24,96")], verify=False,
+                     cache_dir=root / "cache", path_spps=[1, 4, 16], denoise="fast", **SWEEP)
+    chosen = answer["denoised_path"]
+    assert chosen["flip"] <= budget and chosen["spp"] in (1, 4, 16)
+    fastest = min(chosen["time_s"], answer["path"]["time_s"] if answer["path"] else math.inf,
+                  answer.get("sweep_time_s") or math.inf)
+    assert answer["answer"].endswith(f"({fastest:.3g} s)")
+    if fastest == chosen["time_s"]:
+        assert answer["answer"].startswith(f"path trace at {chosen['spp']} spp with the denoiser")
 
 
 def test_atlas_page(sweep, tmp_path):
