@@ -73,7 +73,7 @@ def config_from_props(props: mi.Properties) -> DDMConfig:
     if "map_resolution" in props:   # an integer, or the string "auto"
         value = props.get("map_resolution")
         cfg.map_resolution = "auto" if str(value).strip() == "auto" else _int(value, "map_resolution")
-    cfg.base_params = surfaces.base_params(cfg.base, props, BASE_PARAMS)
+    cfg.base_params = surfaces.base_params("ddm", cfg.base, props, BASE_PARAMS)
     cfg.animation = Animation(**{k: float(props.get(k)) for k in ANIMATION_KEYS if k in props})
     return cfg
 

@@ -137,7 +137,7 @@ class Displaced(mi.Mesh):
             if not self.dicing:
                 self._topology = tessellate.subdivision_topology(mesh_data[3], self._weld, grid)
         else:
-            base = surfaces.make_base(base_name, **surfaces.base_params(base_name, props))
+            base = surfaces.make_base(base_name, **surfaces.base_params("displaced", base_name, props))
             if "split_normals" in props:
                 raise ValueError(f"displaced: 'split_normals' applies to base 'mesh' only "
                                  f"(base is {base_name!r})")

@@ -76,7 +76,7 @@ class Slicing(mi.Mesh):
             raise ValueError("slicing: slices='auto' needs the scene's camera: "
                              "<ref name=\"sensor\" id=\"...\"/> (declared before this shape)")
         resolution = props.get("resolution", 1 if base_name == "plane" else 64)
-        params = surfaces.base_params(base_name, props)
+        params = surfaces.base_params("slicing", base_name, props)
         to_world = np.array(props.get("to_world", mi.ScalarTransform4f()).matrix, np.float64)
         filename = props.get("filename", None) if base_name == "mesh" else None
         bm = geo.make_base_mesh(base_name, params, filename, resolution, to_world)

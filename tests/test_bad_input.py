@@ -145,8 +145,10 @@ CASES = {
         "misspelt": (_vdm_mesh(lambda t: {"resolutoin": 8}), "resolutoin"),
         "wrong_type": (_vdm_mesh(lambda t: {"radius": "big"}), "radius"),
         "non_finite": (_vdm_mesh(lambda t: {"radius": NAN}), "radius"),
-        "missing_file": (_vdm_mesh(lambda t: {"filename": _missing(t, ".ply")}), "no_such_file.ply"),
-        "garbage_file": (_vdm_mesh(lambda t: {"filename": _garbage(t, ".ply")}), "garbage.ply"),
+        "missing_file": (_vdm_mesh(lambda t: {"base": "mesh", "filename": _missing(t, ".ply")}),
+                         "no_such_file.ply"),
+        "garbage_file": (_vdm_mesh(lambda t: {"base": "mesh", "filename": _garbage(t, ".ply")}),
+                         "garbage.ply"),
     },
     "vdm": {
         "misspelt": (_bsdf("vdm", lambda t: {"svd_term": 8}), "svd_term"),
