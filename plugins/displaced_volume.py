@@ -23,7 +23,7 @@ from __future__ import annotations
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.volume import maps as primitives
+from mi_displace.volume import EXAMPLE_XML, maps as primitives
 from mi_displace.volume.displacement import BITS, DisplacementChain, PlacedMap
 from mi_displace.volume.field import MODES, AlbedoField, DisplacedVolume
 from mi_displace.volume.objects import load_raw, load_vol, piggy_bank
@@ -90,18 +90,7 @@ SPEC = PluginSpec(
               + "; ".join(f"{k}: {', '.join(v)}" for k, v in primitives.PRIMITIVES.items())
               + " (angles in degrees)", editable=True),
     ),
-    example="""<volume type="displaced_volume" id="volume">
-    <string name="procedural" value="piggy_bank"/>
-    <integer name="resolution" value="24"/>
-    <string name="map0_type" value="peel"/>
-    <float name="map0_angle" value="45"/>
-    <integer name="map0_resolution" value="16"/>
-</volume>
-<shape type="volume_isosurface">
-    <ref name="volume" id="volume"/>
-    <integer name="resolution" value="24"/>
-    <bsdf type="diffuse"/>
-</shape>""",
+    example=EXAMPLE_XML,
     nested="`source`: a `<ref>` to a sigma_t `displaced_volume`",
     stats="texture_bytes, maps",
     limits="`to_world` is refused: the object is centred with its longest side 1 world unit; "

@@ -27,7 +27,7 @@ import numpy as np
 from mi_displace.core import surfaces, tessellate
 from mi_displace.core.mesh_io import load_uv_mesh
 from mi_displace.core.properties import PluginSpec
-from mi_displace.vdm import mesh_curvature
+from mi_displace.vdm import EXAMPLE_XML, mesh_curvature
 from mi_displace.plugins._guard import constructor
 from mi_displace.vdm.steps import FACE_FORMS
 
@@ -41,18 +41,7 @@ SPEC = PluginSpec(
     (surfaces.base_param("sphere"), *surfaces.BASE_DIMENSIONS,
      surfaces.resolution_param(64, "grid cells along u (coarse: the BSDF adds the detail)"),
      surfaces.EDGE_LENGTH, surfaces.BASE_FILENAME),
-    example="""<shape type="vdm_mesh">
-    <string name="base" value="sphere"/>
-    <integer name="resolution" value="8"/>
-    <bsdf type="vdm">
-        <texture type="cells" name="height"/>
-        <float name="depth" value="0.03"/>
-        <integer name="res" value="16"/>
-        <integer name="theta" value="4"/>
-        <integer name="phi" value="8"/>
-        <integer name="curvatures" value="2"/>
-    </bsdf>
-</shape>""",
+    example=EXAMPLE_XML,
     nested="one `bsdf` (a `vdm`, `horizon` or `relief` BSDF receives the curvature range and "
            "tile size; any other renders the plain base)",
     stats="vertices, faces, curvature_min, curvature_max, build_s, and the attached BSDF's "
