@@ -31,17 +31,15 @@ import argparse
 import importlib
 import inspect
 import pkgutil
-import re
 import sys
 import traceback
 from pathlib import Path
 
 from mi_displace.core import progress
+from mi_displace.core.cli_args import (DEFAULT_MAX_SPP, QUICK_MAX_SPP, UsageError, define,
+                                       positive_int, seed, showcase_scenes)
 from mi_displace.core.progress import stage
 
-QUICK_MAX_SPP = 64
-DEFAULT_MAX_SPP = 1024
-SHOWCASE_MARK = re.compile(r"<!--\s*showcase\s*-->")
 SUMMARY_COLUMNS = (
     ("scene", "scene"), ("FLIP", "flip_mean"), ("noise floor", "noise_floor_flip"),
     ("relMSE", "relmse"), ("PSNR (dB)", "psnr"), ("reference spp", "reference_spp"),
@@ -65,45 +63,11 @@ BUG_HINT = ("mi-displace: internal error (a bug in mi_displace, not in your inpu
             "report it with the command line and the traceback above")
 
 
-class UsageError(ValueError):
-    """Bad command-line input found by the CLI itself."""
-
-
 def default_scenes_dir() -> Path:
     """The packaged scene folder (:func:`mi_displace.core.resources.scenes_dir`)."""
     from mi_displace.core.resources import scenes_dir
 
     return scenes_dir()
-
-
-def _define(text: str) -> tuple[str, str]:
-    """argparse type of ``-D name=value``."""
-    name, sep, value = text.partition("=")
-    if not sep or not re.fullmatch(r"[A-Za-z_]\w*", name):
-        raise argparse.ArgumentTypeError(f"expected name=value, got {text!r}")
-    return name, value
-
-
-def _positive_int(text: str) -> int:
-    """argparse type of a positive integer."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
-
-
-def _seed(text: str) -> int:
-    """argparse type of a sampler seed in [0, 2^32)."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = -1
-    if not 0 <= value < 2**32:
-        raise argparse.ArgumentTypeError(f"expected an integer in [0, 2^32), got {text!r}")
-    return value
 
 
 def _version() -> str:
@@ -124,18 +88,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     def quick_and_max_spp(p):
         p.add_argument("--quick", action="store_true", help=f"cap references at {QUICK_MAX_SPP} spp")
-        p.add_argument("--max-spp", type=_positive_int, default=None,
+        p.add_argument("--max-spp", type=positive_int, default=None,
                        help=f"most reference spp (default {DEFAULT_MAX_SPP}, {QUICK_MAX_SPP} with --quick)")
 
     def defines(p):
-        p.add_argument("-D", dest="defines", metavar="NAME=VALUE", action="append", type=_define,
+        p.add_argument("-D", dest="defines", metavar="NAME=VALUE", action="append", type=define,
                        default=[], help="scene parameter ($NAME in the XML); repeatable")
 
     p = sub.add_parser("render", help="render a scene to an image")
     p.add_argument("scene", type=Path, help="scene XML file")
     defines(p)
-    p.add_argument("--spp", type=_positive_int, help="samples per pixel (default: the scene's)")
-    p.add_argument("--seed", type=_seed, default=0, help="sampler seed (default 0)")
+    p.add_argument("--spp", type=positive_int, help="samples per pixel (default: the scene's)")
+    p.add_argument("--seed", type=seed, default=0, help="sampler seed (default 0)")
     p.add_argument("--bits", type=int, choices=(8, 16), default=8, help="bits per channel of a PNG")
     p.add_argument("--out", type=Path, help="output image, .exr (linear) or .png (sRGB)")
     p.add_argument("--explain", action="store_true",
@@ -256,16 +220,6 @@ def _cmd_compare(args) -> int:
           f"approximation {r['approx_time_warm_s']:.3f} s warm, {r['approx_time_cold_s']:.3f} s cold; "
           f"speed-up {r['speedup']:.3g}x\nwrote {args.out}/panel.png, metrics.json")
     return 0
-
-
-def showcase_scenes(scenes_dir: Path) -> list[Path]:
-    """Scene XML files under ``scenes_dir`` that contain ``<!-- showcase -->``, sorted."""
-    if not scenes_dir.is_dir():
-        raise FileNotFoundError(f"scene folder {str(scenes_dir)!r} does not exist")
-    found = sorted(p for p in scenes_dir.rglob("*.xml") if SHOWCASE_MARK.search(p.read_text()))
-    if not found:
-        raise UsageError(f"no scene under {str(scenes_dir)!r} is marked <!-- showcase -->")
-    return found
 
 
 def _cmd_showcase(args) -> int:

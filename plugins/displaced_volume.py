@@ -62,7 +62,8 @@ SPEC = PluginSpec(
               "object, maps and mode this one shares (`<ref>`)"),
         *_object_params("", "the object"),
         Param("mode", "string", "reference", "exact pre-images or the sampled D_k", choices=MODES),
-        Param("tf_low", "float", 0.1, "transfer ramp start on the normalised density (< tf_high)"),
+        Param("tf_low", "float", 0.1, "transfer ramp start on the normalised density (< tf_high; "
+              "tau(0) = 0 keeps empty space empty)", low=0, high=1, open_high=True),
         Param("tf_high", "float", 0.6, "transfer ramp end on the normalised density"),
         Param("density_scale", "float", 20.0, "sigma_t at tau = 1", unit="1/world", low=0,
               open_low=True),
@@ -93,7 +94,8 @@ SPEC = PluginSpec(
     example=EXAMPLE_XML,
     nested="`source`: a `<ref>` to a sigma_t `displaced_volume`",
     stats="texture_bytes, maps",
-    limits="`to_world` is refused: the object is centred with its longest side 1 world unit; "
+    limits="`to_world` is refused: the object fills its own box (raw: centred, longest side 1 "
+           "world unit; .vol: its header's box); "
            "edits that grow the object past the medium box fixed at load are refused (give "
            "`bounds`).  Map parameters are editable, not differentiable.",
 )
@@ -186,8 +188,9 @@ class DisplacedVolumePlugin(mi.Volume):
     def __init__(self, props: mi.Properties, values: dict):
         if "to_world" in props:   # it would be overwritten below by the medium box: refuse it
             raise ValueError("displaced_volume: parameter 'to_world' is not supported: the object "
-                             "is centred with its longest side 1 world unit (docs/volume.md); place "
-                             "the maps with map<i>_to_world and move the camera, not the object")
+                             "fills its own box (raw: centred, longest side 1 world unit; .vol: its "
+                             "header's box; docs/volume.md, Conventions); place the maps with "
+                             "map<i>_to_world and move the camera, not the object")
         self.output = values["output"]
         source = values["source"]
         if source is not None:

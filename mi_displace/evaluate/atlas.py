@@ -29,7 +29,7 @@ BUDGETS_S = (0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0)
 
 def atlas_scenes(scenes_dir) -> list[Path]:
     """Showcase scenes under ``scenes_dir`` that declare at least one trade-off knob."""
-    from mi_displace.cli import showcase_scenes
+    from mi_displace.core.cli_args import showcase_scenes
 
     return [p for p in showcase_scenes(Path(scenes_dir)) if tr.declared_knobs(p)]
 
@@ -155,7 +155,7 @@ def atlas(out_dir, scenes_dir=None, max_spp: int = 1024, cluster: str | None = N
     Returns:
         ``{"scenes": {name: tradeoff result}, "failures": {name: message}, "budgets": rows}``.
     """
-    from mi_displace.cli import default_scenes_dir
+    from mi_displace.core.resources import scenes_dir as default_scenes_dir
 
     scenes_dir = Path(scenes_dir) if scenes_dir is not None else default_scenes_dir()
     out_dir = Path(out_dir)

@@ -20,9 +20,9 @@ from pathlib import Path
 
 
 def _sweep_options(p) -> None:
-    from mi_displace.cli import DEFAULT_MAX_SPP, _positive_int
+    from mi_displace.core.cli_args import DEFAULT_MAX_SPP, positive_int
 
-    p.add_argument("--max-spp", type=_positive_int, default=DEFAULT_MAX_SPP,
+    p.add_argument("--max-spp", type=positive_int, default=DEFAULT_MAX_SPP,
                    help=f"most reference samples per pixel (default {DEFAULT_MAX_SPP})")
     p.add_argument("--noise-floor", type=float, default=None, metavar="FLIP",
                    help="reference noise-floor target: its spp doubles until the two-seed floor "
@@ -122,24 +122,24 @@ def _cmd_animate(args) -> int:
 
 def animation_options(p, frames: int = 24) -> None:
     """The options every frame command shares: ``--frames --spp --chunk --cluster -D --out``."""
-    from mi_displace.cli import _define, _positive_int
+    from mi_displace.core.cli_args import define, positive_int
 
-    p.add_argument("--frames", type=_positive_int, default=frames,
+    p.add_argument("--frames", type=positive_int, default=frames,
                    help=f"number of frames ({frames})")
-    p.add_argument("--spp", type=_positive_int, default=None, help="samples per pixel")
-    p.add_argument("--chunk", type=_positive_int, default=8, help="frames per job (8)")
+    p.add_argument("--spp", type=positive_int, default=None, help="samples per pixel")
+    p.add_argument("--chunk", type=positive_int, default=8, help="frames per job (8)")
     p.add_argument("--cluster", default=None, metavar="ADDRESS",
                    help="render the chunks on a Dask cluster: tcp://HOST:PORT, or local:N")
-    p.add_argument("-D", dest="defines", action="append", type=_define, default=[],
+    p.add_argument("-D", dest="defines", action="append", type=define, default=[],
                    metavar="NAME=VALUE", help="scene parameter; repeatable")
     p.add_argument("--out", type=Path, required=True, help="output folder")
 
 
 def add_commands(sub) -> dict:
-    from mi_displace.cli import _define
+    from mi_displace.core.cli_args import define
 
     def defines(p):
-        p.add_argument("-D", dest="defines", action="append", type=_define, default=[],
+        p.add_argument("-D", dest="defines", action="append", type=define, default=[],
                        metavar="NAME=VALUE", help="fixed scene parameter; repeatable")
 
     p = sub.add_parser("tradeoff", help="sweep quality knobs: error against time")

@@ -30,22 +30,22 @@ def _positive_float(text: str) -> float:
 
 def add_commands(sub) -> dict:
     """Add ``recover`` to ``sub``; returns {command: handler}."""
-    from mi_displace.cli import _positive_int
+    from mi_displace.core.cli_args import positive_int
     p = sub.add_parser("recover", help="recover a height map from renders (inverse displacement)")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--iterations", type=_positive_int, default=40, help="Adam steps (default 40)")
-    p.add_argument("--map-size", type=_positive_int, default=64, help="height map texels per side (default 64)")
-    p.add_argument("--image-size", type=_positive_int, default=64, help="render pixels per side (default 64)")
-    p.add_argument("--views", type=_positive_int, default=3, help="cameras (default 3)")
+    p.add_argument("--iterations", type=positive_int, default=40, help="Adam steps (default 40)")
+    p.add_argument("--map-size", type=positive_int, default=64, help="height map texels per side (default 64)")
+    p.add_argument("--image-size", type=positive_int, default=64, help="render pixels per side (default 64)")
+    p.add_argument("--views", type=positive_int, default=3, help="cameras (default 3)")
     p.add_argument("--lights", type=int, choices=(1, 2), default=2, help="directional lights (default 2)")
-    p.add_argument("--spp", type=_positive_int, default=8, help="samples per pixel per render (default 8)")
+    p.add_argument("--spp", type=positive_int, default=8, help="samples per pixel per render (default 8)")
     p.add_argument("--integrator", choices=("prb_projective", "direct_projective"),
                    default="prb_projective", help="differentiable integrator (default prb_projective)")
     p.add_argument("--learning-rate", type=_positive_float, default=0.05, help="Adam step (default 0.05)")
     p = sub.add_parser("recover-bunny", help="recover the bunny's map from renders of the scan "
                        "and compare it with the baked map (inverse displacement on a mesh)")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--iterations", type=_positive_int, default=30, help="Adam steps (default 30)")
+    p.add_argument("--iterations", type=positive_int, default=30, help="Adam steps (default 30)")
     p.add_argument("--learning-rate", type=_positive_float, default=0.002, help="Adam step (default 0.002)")
     return {"recover": _recover, "recover-bunny": _recover_bunny}
 

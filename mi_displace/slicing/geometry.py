@@ -114,27 +114,6 @@ class BaseMesh:
         return pts.min(0), pts.max(0)
 
 
-def vertex_tangents(pos: np.ndarray, uvs: np.ndarray, faces: np.ndarray):
-    """Per-vertex dS/du, dS/dv from the triangles' uv mapping (face values averaged)."""
-    p0, p1, p2 = (pos[faces[:, i]] for i in range(3))
-    t0, t1, t2 = (uvs[faces[:, i]] for i in range(3))
-    e1, e2 = p1 - p0, p2 - p0
-    d1, d2 = t1 - t0, t2 - t0
-    det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
-    ok = np.abs(det) > 1e-14
-    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
-    su_f = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * inv
-    sv_f = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * inv
-    su, sv = np.zeros_like(pos), np.zeros_like(pos)
-    count = np.zeros(len(pos))
-    for i in range(3):
-        np.add.at(su, faces[ok, i], su_f[ok])
-        np.add.at(sv, faces[ok, i], sv_f[ok])
-        np.add.at(count, faces[ok, i], 1.0)
-    count = np.maximum(count, 1.0)[:, None]
-    return su / count, sv / count
-
-
 def make_base_mesh(base_name: str, params: dict, filename: str | None, resolution,
                    to_world: np.ndarray, owner: str = "slicing") -> BaseMesh:
     """The coarse base polygons (what the GPU draws) of a parametric base or a mesh file.
@@ -173,7 +152,7 @@ def make_base_mesh(base_name: str, params: dict, filename: str | None, resolutio
     fn = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
     inward = np.einsum("ij,ij->i", fn, nrm[faces].sum(1)) < 0
     faces[inward] = faces[inward][:, ::-1]
-    su, sv = vertex_tangents(pos, uvs, faces)
+    su, sv = (a.astype(np.float64) for a in tessellate.vertex_frames(pos, nrm, uvs, faces)[:2])
     return BaseMesh(pos, nrm, uvs, faces, su, sv, base, m, extrude)
 
 

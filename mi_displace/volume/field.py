@@ -48,7 +48,8 @@ class DisplacedVolume:
 
     Args:
         obj: the object O_j; chain: the displacement maps; mode: reference/approximation.
-        tf_low, tf_high: transfer ramp on the normalised density; density_scale: sigma_t at τ = 1
+        tf_low, tf_high: transfer ramp on the normalised density, 0 <= tf_low < 1 and
+        tf_low < tf_high (τ(0) = 0: empty space stays empty); density_scale: sigma_t at τ = 1
         (world units⁻¹).
     """
 
@@ -58,6 +59,10 @@ class DisplacedVolume:
             raise ValueError(f"mode: must be one of {MODES}, got {mode!r}")
         if not (np.isfinite(tf_low) and np.isfinite(tf_high) and tf_high > tf_low):
             raise ValueError(f"tf_low/tf_high: need finite tf_low < tf_high, got {tf_low}, {tf_high}")
+        if not 0 <= tf_low < 1:   # τ(0) = 0 keeps empty voxels and the outside of the box empty
+            raise ValueError(f"tf_low: must lie in [0, 1), the range of the normalised density (below 0, "
+                             f"empty space and everything outside the object's box gets density; from 1 "
+                             f"on, nothing does), got {tf_low}")
         if not (np.isfinite(density_scale) and density_scale > 0):
             raise ValueError(f"density_scale: must be finite and > 0, got {density_scale}")
         self.obj, self.chain, self.mode = obj, chain, mode
