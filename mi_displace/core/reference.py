@@ -1,6 +1,6 @@
 """The plugin reference (``docs/plugins.md``) generated from the plugins' declarations.
 
-One source of truth: each converted plugin module holds a
+One source of truth: each plugin module holds a
 :class:`~mi_displace.core.properties.PluginSpec` named ``SPEC`` (``SPECS``: a tuple, for a module
 registering several plugins); this module renders them in
 the form of Mitsuba's own plugin reference (Parameter / Type / Default / Range / Unit /
@@ -67,8 +67,10 @@ def markdown(specs: list[PluginSpec]) -> str:
     head = ["# Plugin reference", "",
             "Generated from the plugins' declarations by `python -m mi_displace.core.reference`; "
             "do not edit by hand.  Every parameter is checked when the plugin is built: a wrong "
-            "type or a value out of range is a one-line error naming the plugin and the parameter.",
-            "", "Plugins declared so far: " + ", ".join(f"`{s.plugin}`" for s in specs) + ".", ""]
+            "type or a value out of range is a one-line error naming the plugin and the parameter.  "
+            "A name with placeholders is a family: `map<i>_type` stands for `map0_type`, "
+            "`map1_type`, …, and `map<i>_<parameter>` for any parameter name in that place.",
+            "", "Plugins: " + ", ".join(f"`{s.plugin}`" for s in specs) + ".", ""]
     return "\n".join(head + [plugin_markdown(s) for s in specs])
 
 
