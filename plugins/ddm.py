@@ -1,8 +1,7 @@
 """``<shape type="ddm">``: a base surface tiled with copies of detail tiles through
 T(u, v, w) = S(u, v) + n(u, v) w (DDM, eq. 1) or its geometry-image form (HDDM, eq. 2).
 
-(:data:`SPEC` declares its parameters.)  Every parameter is described in ``docs/ddm.md`` (mesh bases also take ``chart_border``
-clamp|drop; ``map_resolution="auto"`` takes ``dicing_rate`` / ``tolerance``).  ``time``,
+(:data:`SPEC` declares its parameters; ``docs/ddm.md`` describes them in depth.)  ``time``,
 ``height`` and ``tile_positions`` are editable and differentiable through ``mi.traverse``:
 changing them re-maps the vertices (positions, normals) in place, keeping faces, geometry
 images and tiles.
