@@ -1,7 +1,8 @@
 """Mitsuba plugin adapters (installed as ``mi_displace.plugins``).
 
-Each module declares one plugin (its ``SPEC`` where converted to the typed property reader
-of :mod:`mi_displace.core.properties`) and a ``register()`` function; :func:`register_all`
+Each module declares its plugin's parameters (``SPEC``: a
+:class:`~mi_displace.core.properties.PluginSpec`; ``SPECS`` where it registers several) and has a
+``register()`` function; :func:`register_all`
 (re)imports them after a variant change, after the library modules of
 :data:`VARIANT_MODULES`, whose classes derive from the variant's Mitsuba types.
 """

@@ -1,32 +1,14 @@
 """``<shape type="ddm">``: a base surface tiled with copies of detail tiles through
 T(u, v, w) = S(u, v) + n(u, v) w (DDM, eq. 1) or its geometry-image form (HDDM, eq. 2).
 
-.. code-block:: xml
-
-    <shape type="ddm" id="thorns">
-        <string name="base" value="sphere"/>        <!-- plane|sphere|cylinder|torus|teapot|mesh -->
-        <float name="radius" value="1"/>
-        <string name="tile" value="thorn"/>         <!-- thorn|flower|chain|hair|hexagon|stone[:SEED]|file.obj, comma list -->
-        <string name="layout" value="rect"/>        <!-- rect|hex|alternate|random -->
-        <integer name="tiles_u" value="32"/>
-        <integer name="tiles_v" value="16"/>
-        <float name="height" value="0.15"/>         <!-- object units per unit tile z -->
-        <string name="mode" value="maps"/>          <!-- exact|maps (reference|approximation) -->
-        <integer name="map_resolution" value="256"/>
-        <string name="normals" value="tangent"/>    <!-- tangent|jacobian|naive -->
-        <bsdf type="diffuse"/>
-    </shape>
-
-Every parameter is described in ``docs/ddm.md`` (mesh bases also take ``chart_border``
-clamp|drop; ``map_resolution="auto"`` takes ``dicing_rate`` / ``tolerance``).  ``time``,
+(:data:`SPEC` declares its parameters; ``docs/ddm.md`` describes them in depth.)  ``time``,
 ``height`` and ``tile_positions`` are editable and differentiable through ``mi.traverse``:
 changing them re-maps the vertices (positions, normals) in place, keeping faces, geometry
 images and tiles.
 """
 from __future__ import annotations
 
-import math
-
+import dataclasses
 import time
 
 import drjit as dr
@@ -34,58 +16,107 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.core import surfaces
+from mi_displace.core.properties import Param, PluginSpec
+from mi_displace.ddm import base_maps, charts, mapping, normals
 from mi_displace.ddm.animation import Animation
+from mi_displace.ddm.layout import LAYOUTS
 from mi_displace.ddm.model import BASE_PARAMS, DDMConfig, DDMModel
 from mi_displace.plugins._guard import constructor, take_sensors
 
-FLOAT_KEYS = ("gap_u", "gap_v", "w_offset", "u0", "v0", "height", "epsilon", "time", "tolerance",
-              "dicing_rate")
-INT_KEYS = ("tiles_u", "tiles_v", "seed")
-STRING_KEYS = ("base", "filename", "tile", "tile_target", "layout", "mode", "normals", "chart_border")
-ANIMATION_KEYS = ("velocity_u", "velocity_v", "rotation_rate", "w_amplitude", "w_frequency",
-                  "alpha0", "alpha_rate")
+_CONFIG, _ANIMATION = DDMConfig(), Animation()
+_ANIMATION_DOCS = {
+    "velocity_u": ("tile translation along u", "tile widths/time"),
+    "velocity_v": ("tile translation along v", "tile heights/time"),
+    "rotation_rate": ("tile rotation about its centre", "rad/time"),
+    "w_amplitude": ("relative w scaling amplitude", ""),
+    "w_frequency": ("frequency of the w scaling", "1/time"),
+    "alpha0": ("metamorphosis alpha at t = 0 (eq. 3)", ""),
+    "alpha_rate": ("metamorphosis alpha per time unit (eq. 3)", "1/time"),
+}
+
+SPEC = PluginSpec(
+    "ddm", "shape",
+    "Distance/displacement-mapped detail tiles (DDM): a base surface tiled with copies of "
+    "detail tiles through T(u, v, w) = S(u, v) + n(u, v) w (eq. 1), or its geometry-image form "
+    "(HDDM, eq. 2) with `mode=maps`.  `traverse` also exposes `tile_positions` (the tiles' "
+    "vertices; editable, differentiable): an edit of it, `time` or `height` re-maps the "
+    "vertices in place, keeping faces, geometry images and tiles.",
+    (
+        surfaces.base_param(_CONFIG.base, (*BASE_PARAMS, "mesh")), *surfaces.BASE_DIMENSIONS,
+        dataclasses.replace(surfaces.BASE_FILENAME, doc="base `mesh`: a PLY/OBJ with UVs; base "
+                            "`teapot`: its Bezier patch file (default: the Utah teapot body)"),
+        Param("tile", "string", _CONFIG.tile, "thorn | flower | chain | hair | hexagon | "
+              "stone[:SEED] | a tile file (.obj/.ply), or a comma list of them"),
+        Param("tile_target", "string", None, "metamorphosis partner of `tile` (eq. 3)"),
+        Param("layout", "string", _CONFIG.layout, "tile placement", choices=LAYOUTS),
+        Param("tiles_u", "int", _CONFIG.tiles_u, "tiles along u", low=1),
+        Param("tiles_v", "int", _CONFIG.tiles_v, "tiles along v", low=1),
+        Param("gap_u", "float", _CONFIG.gap_u, "gap between tiles along u", unit="cells",
+              low=0, high=1, open_high=True),
+        Param("gap_v", "float", _CONFIG.gap_v, "gap between tiles along v", unit="cells",
+              low=0, high=1, open_high=True),
+        Param("w_offset", "float", _CONFIG.w_offset, "offset of the tiles along the normal", unit="object"),
+        Param("u0", "float", _CONFIG.u0, "layout origin in u", unit="uv"),
+        Param("v0", "float", _CONFIG.v0, "layout origin in v", unit="uv"),
+        Param("seed", "int", _CONFIG.seed, "seed of the random layout", low=0),
+        Param("height", "float", _CONFIG.height, "w scale: object units per unit tile z",
+              unit="object", editable=True, differentiable=True),
+        Param("mode", "string", _CONFIG.mode, "exact mapping (`reference`) or geometry images "
+              "(`approximation`)", choices=(*mapping.MODES, *mapping.MODE_ALIASES)),
+        Param("map_resolution", "int", _CONFIG.map_resolution, "`maps`: geometry-image texels "
+              "per side (auto: the smallest meeting `tolerance`, or `dicing_rate` with sensors)",
+              low=base_maps.MIN_MAP_RESOLUTION, high=base_maps.MAX_MAP_RESOLUTION, auto=True),
+        Param("tolerance", "float", _CONFIG.tolerance, "auto without a sensor: largest mapped-point "
+              "error", unit="base diagonals", low=0, open_low=True),
+        Param("dicing_rate", "float", _CONFIG.dicing_rate, "auto with sensors: pixels per texel",
+              unit="px", low=0, open_low=True),
+        Param("chart_border", "string", _CONFIG.chart_border, "mesh bases: tiles across UV-chart "
+              "borders are clamped or dropped", choices=charts.CHART_BORDERS),
+        Param("normals", "string", _CONFIG.normals, "how mapped normals are found",
+              choices=normals.METHODS),
+        Param("epsilon", "float", _CONFIG.epsilon, "finite-difference step of the normals",
+              unit="tile", low=0, high=0.5, open_low=True, open_high=True),
+        Param("time", "float", _CONFIG.time, "animation time", unit="time", editable=True,
+              differentiable=True),
+        *(Param(k, "float", getattr(_ANIMATION, k), doc, unit=unit)
+          for k, (doc, unit) in _ANIMATION_DOCS.items()),
+    ),
+    example="""<shape type="ddm">
+    <string name="base" value="sphere"/>
+    <string name="tile" value="thorn"/>
+    <integer name="tiles_u" value="8"/>
+    <integer name="tiles_v" value="4"/>
+    <integer name="map_resolution" value="32"/>
+    <bsdf type="diffuse"/>
+</shape>""",
+    nested="one `bsdf`; sensors (`<ref id=\"camera\"/>`) for `map_resolution=auto`",
+    stats="mode, tiles_placed, tiles_pruned, vertices, hddm_bytes, tile_bytes, maps_bytes, "
+          "mesh_bytes, map_resolution (and its rule, auto trials), map_s, bytes, "
+          "clamped_vertices; mesh bases: tiles_straddling, tiles_dropped",
+    limits="Tiles are mapped, not clipped: a tile across a UV-chart border of a mesh base is "
+           "clamped or dropped (`chart_border`); T folds where |w| exceeds the base's radius of "
+           "curvature (warns).",
+)
+
+_CONFIG_KEYS = {f.name for f in dataclasses.fields(DDMConfig)} - {"base_params", "animation", "base"}
 
 
-def _int(value, name: str, low: int = 0) -> int:
-    """A whole number >= ``low`` (2.5 is refused, not truncated)."""
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        number = math.nan
-    if not (math.isfinite(number) and number == int(number) and number >= low):
-        what = "an integer or 'auto'" if name == "map_resolution" else f"an integer >= {low}"
-        raise ValueError(f"ddm: '{name}' must be {what}, got {value!r}")
-    return int(number)
-
-
-def config_from_props(props: mi.Properties) -> DDMConfig:
-    """Read a :class:`DDMConfig` from plugin properties (every key optional)."""
-    cfg = DDMConfig()
-    for key in STRING_KEYS:
-        if key in props:
-            setattr(cfg, key, str(props.get(key)))
-    for key in FLOAT_KEYS:
-        if key in props:
-            setattr(cfg, key, float(props.get(key)))
-    for key in INT_KEYS:
-        if key in props:
-            setattr(cfg, key, _int(props.get(key), key, 0 if key == "seed" else 1))
-    if "map_resolution" in props:   # an integer, or the string "auto"
-        value = props.get("map_resolution")
-        cfg.map_resolution = "auto" if str(value).strip() == "auto" else _int(value, "map_resolution")
-    cfg.base_params = surfaces.base_params(cfg.base, props, BASE_PARAMS)
-    cfg.animation = Animation(**{k: float(props.get(k)) for k in ANIMATION_KEYS if k in props})
-    return cfg
+def config_from_values(values: dict) -> DDMConfig:
+    """A :class:`DDMConfig` from the read :data:`SPEC` ``values``."""
+    base = surfaces.base_name("ddm", values, _CONFIG.base, file_bases=("mesh", "teapot"))
+    return DDMConfig(base=base, base_params=surfaces.base_params("ddm", base, values, BASE_PARAMS),
+                     animation=Animation(**{k: values[k] for k in _ANIMATION_DOCS}),
+                     **{k: values[k] for k in _CONFIG_KEYS})
 
 
 class DDM(mi.Mesh):
     """Tiles mapped over a base; a mi.Mesh whose vertices a Dr.Jit kernel writes."""
 
-    def __init__(self, props: mi.Properties):
+    def __init__(self, props: mi.Properties, values: dict):
         self.sensors = take_sensors(props)   # referenced for map_resolution="auto"
         self.to_world = mi.ScalarTransform4f(mi.ScalarMatrix4f(np.array(
             props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float32)))
-        self.model = DDMModel(config_from_props(props), sensors=self.sensors, to_world=self.to_world)
+        self.model = DDMModel(config_from_values(values), sensors=self.sensors, to_world=self.to_world)
         m = self.model
         super().__init__(props.id() or "ddm", m.vertex_count, m.face_count, props, True, True)
         self.time = mi.Float(m.cfg.time)
@@ -157,4 +188,4 @@ class DDM(mi.Mesh):
 
 
 def register():
-    mi.register_shape("ddm", constructor("ddm", DDM))
+    mi.register_shape("ddm", constructor(SPEC, DDM))

@@ -1,14 +1,7 @@
 """``<shape type="depth_object">`` and ``<shape type="visual_hull">``: image-based depth
 objects (§4) and visual hulls (§5).
 
-.. code-block:: xml
-
-    <shape type="depth_object">
-        <string name="filename" value="cup/cube.json"/>  <!-- six images + cube (depth_object.write) -->
-        <!-- or a nested source shape, captured at load:  <shape type="ply" name="source" .../>
-             with <integer name="resolution" value="256"/> -->
-        <integer name="slices" value="150"/>              <!-- planes across the cube -->
-    </shape>
+(:data:`SPECS` declares their parameters.)
 
 The shape is the cube (12 triangles, placed by ``to_world``: any affine transform) the rays enter; its BSDF slices the cube front to back
 in the best orthogonal direction and draws the first point inside all six displacement
@@ -18,16 +11,51 @@ colour of the three best-facing images and their normals; elsewhere a Null pass-
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import mitsuba as mi
 import numpy as np
 
 from mi_displace.core.mesh_io import resolve_path
-from mi_displace.slicing.bsdf import DepthObjectBSDF, ViewColour, slice_count
+from mi_displace.core.properties import Param, PluginSpec
+from mi_displace.slicing.bsdf import DepthObjectBSDF, ViewColour
+from mi_displace.slicing.geometry import MAX_SLICES
 from mi_displace.vdm.mesostructure import nested_objects
 from mi_displace.slicing import depth_object as dobj
 from mi_displace.plugins._guard import constructor
+
+SPEC = PluginSpec(
+    "depth_object", "shape",
+    "An image-based depth object (§4): six depth images on the faces of a cube.  The shape "
+    "is the cube (12 triangles, placed by `to_world`: any affine transform); its BSDF slices "
+    "it front to back in the best orthogonal direction and draws the first point inside all "
+    "six displacement volumes, shaded diffusely with the view-dependent colour of the three "
+    "best-facing images and their normals; elsewhere a Null pass-through.",
+    (
+        Param("filename", "string", None, "a cube.json of six images (`mi-displace slicing-capture`)"),
+        Param("source", "shape", None, "instead of `filename`: a nested shape, captured at load"),
+        Param("resolution", "int", 256, "`source`: pixels along each captured image edge",
+              unit="px", low=1, high=8192),
+        Param("slices", "int", 25, "planes across the cube", low=1, high=MAX_SLICES),
+    ),
+    example="""<shape type="depth_object">
+    <string name="filename" value="parts/slicing_cup_depth/cube.json"/>
+    <integer name="slices" value="16"/>
+</shape>""",
+    nested="`source` (a shape to capture); no `bsdf` (the colour comes from the images)",
+    stats="slices, hull, resolution (image pixels per edge), bytes, build_s",
+    limits="Only what the six axis-aligned views see is represented; concavities hidden from "
+           "all six are filled.",
+)
+#: ``visual_hull``: the same cube and parameters with binary silhouettes (§5).
+HULL_SPEC = dataclasses.replace(
+    SPEC, plugin="visual_hull",
+    summary="A visual hull (§5): `depth_object` with binary silhouettes instead of depths "
+            "(the intersection of the six extruded silhouettes), drawn and coloured the same way.",
+    example=SPEC.example.replace("depth_object", "visual_hull"),
+    limits="Concavities are filled: a hull is never smaller than the object.")
+SPECS = (SPEC, HULL_SPEC)
 
 
 def _cube(center, half):
@@ -44,19 +72,15 @@ class DepthObjectShape(mi.Mesh):
 
     HULL = False
 
-    def __init__(self, props: mi.Properties):
+    def __init__(self, props: mi.Properties, values: dict):
         start = time.perf_counter()
         name = "visual_hull" if self.HULL else "depth_object"
-        slices = slice_count(props)
-        if slices == "auto":
-            raise ValueError(f"{name}: 'slices' must be an integer")
-        shapes = nested_objects(props, mi.Shape)
-        if "filename" in props:
-            images = dobj.read(resolve_path(props.get("filename")))
-        elif shapes:
-            images = dobj.capture(shapes[0][1], int(props.get("resolution", 256)))
-            for key, _ in shapes:
-                del props[key]
+        slices, source = values["slices"], values["source"]
+        if values["filename"] is not None:
+            images = dobj.read(resolve_path(values["filename"]))
+        elif source is not None:
+            images = dobj.capture(source, values["resolution"])
+            del props["source"]
         else:
             raise ValueError(f"{name}: give 'filename' (a cube.json of six images) or a nested "
                              "source shape to capture")
@@ -88,5 +112,5 @@ class VisualHullShape(DepthObjectShape):
 
 
 def register():
-    mi.register_shape("depth_object", constructor("depth_object", DepthObjectShape))
-    mi.register_shape("visual_hull", constructor("visual_hull", VisualHullShape))
+    mi.register_shape("depth_object", constructor(SPEC, DepthObjectShape))
+    mi.register_shape("visual_hull", constructor(HULL_SPEC, VisualHullShape))

@@ -1,16 +1,6 @@
 """``<shape type="displaced">``: a base surface displaced along its normal by a height texture.
 
-.. code-block:: xml
-
-    <shape type="displaced">
-        <string name="base" value="sphere"/>      <!-- plane | sphere | cylinder | torus | mesh -->
-        <float name="radius" value="1"/>           <!-- sphere, cylinder -->
-        <texture type="ripples" name="height"/>    <!-- any texture; h in texture units -->
-        <float name="scale" value="0.1"/>          <!-- object units per unit height -->
-        <float name="midlevel" value="0"/>         <!-- height with zero displacement -->
-        <integer name="resolution" value="256"/>   <!-- cells along u (or edge_length) -->
-        <bsdf type="diffuse"/>
-    </shape>
+(:data:`SPEC` declares its parameters.)
 
 Mesh bases: ``base="mesh"`` with ``filename`` (PLY/OBJ with UVs) and ``subdivision`` (edge
 splits per triangle) or ``edge_length``.  Meshes without UVs are refused (unwrap them
@@ -50,22 +40,68 @@ import numpy as np
 
 from mi_displace.core import dicing, surfaces, tessellate, thickness
 from mi_displace.core.mesh_io import load_uv_mesh
+from mi_displace.core.properties import Param, PluginSpec
 from mi_displace.core.texture_height import check_texture_finite, height_function, warn_if_srgb
 from mi_displace.core.thickness import crossing_check, crossing_warning
-from mi_displace.plugins._guard import boolean, constructor, take_sensors
+from mi_displace.plugins._guard import constructor, take_sensors
 
-def _mesh_level(mesh_data, props, edge_length) -> int:
+SPEC = PluginSpec(
+    "displaced", "shape",
+    "True displacement: a base surface (parametric, or a mesh with UVs) tessellated and "
+    "displaced along its normal, P = S + scale (h - midlevel) n, by a height texture.  Every "
+    "copy of a mesh position (UV seams, hard edges) moves by one vector, so closed meshes stay "
+    "closed.  Tessellation is uniform (`resolution` / `edge_length` / `subdivision`) or "
+    "screen-adaptive (`dicing_rate`, Cycles' meaning) for the sensors referenced in the shape "
+    "(`<ref id=\"camera\"/>`), else the scene's once `mi_displace.fit_to_sensors` runs.  Edits "
+    "through `mi.traverse` re-displace the mesh (keeping its topology when no edge rate moved); "
+    "the height texture's own parameters are editable and differentiable too.",
+    (
+        surfaces.base_param("sphere"), *surfaces.BASE_DIMENSIONS,
+        surfaces.resolution_param(None, "uniform: grid cells along u (default 64; v keeps the "
+                                  "base's aspect ratio)"),
+        surfaces.EDGE_LENGTH, surfaces.BASE_FILENAME,
+        Param("subdivision", "int", 1, "uniform, mesh base: edge splits per triangle", low=1),
+        Param("split_normals", "bool", False, "mesh base: move each copy of a position along "
+              "its own normal (cracks open where they differ; warns)"),
+        Param("height", "texture", None, "the height h (none: the undisplaced base)",
+              unit="texture", editable=True, differentiable=True),
+        Param("scale", "float", 0.1, "displacement per unit height", unit="object",
+              editable=True, differentiable=True),
+        Param("midlevel", "float", 0.0, "height with zero displacement", unit="texture",
+              editable=True, differentiable=True),
+        Param("tessellation", "string", None, "uniform or dicing (default: dicing when "
+              "`dicing_rate` is given)", choices=("uniform", "dicing")),
+        Param("dicing_rate", "float", None, "dicing: pixels per micro-edge", unit="px",
+              low=0, open_low=True, editable=True),
+        Param("offscreen_dicing_scale", "float", 4.0, "dicing: rate multiplier outside the view "
+              "frustum and behind the camera", low=1, editable=True),
+    ),
+    example="""<shape type="displaced">
+    <string name="base" value="sphere"/>
+    <texture type="ripples" name="height"/>
+    <float name="scale" value="0.1"/>
+    <integer name="resolution" value="32"/>
+    <bsdf type="diffuse"/>
+</shape>""",
+    nested="the `height` texture, one `bsdf`; sensors (`<ref id=\"camera\"/>`) for dicing",
+    stats="mode, tessellate_s, vertices, faces, bytes, crossing_vertices, warnings; dicing: "
+          "dicing_rate, offscreen_dicing_scale, sensors, bound, patches, patch_grid, "
+          "edge_segments_min/max, rebuilt, rates_s, topology_s, displace_s",
+    limits="Displacement deeper than the base's thickness crosses the other side (warns); "
+           "meshes need UVs; integer texture parameters and the dicing rates take no gradient "
+           "(refused by name).",
+)
+
+
+def _mesh_level(mesh_data, values: dict) -> int:
     """Edge splits per base triangle: ``subdivision`` or from ``edge_length``."""
+    edge_length = values["edge_length"]
     if edge_length is not None:
-        if not edge_length > 0:
-            raise ValueError(f"displaced: 'edge_length' must be > 0, got {edge_length}")
         pos, faces = mesh_data[0], mesh_data[3]
         mean_edge = float(np.mean(np.linalg.norm(pos[faces] - pos[np.roll(faces, 1, 1)], axis=2)))
         level = max(1, math.ceil(mean_edge / edge_length))
     else:
-        level = props.get("subdivision", 1)
-        if int(level) != level or level < 1:
-            raise ValueError(f"displaced: 'subdivision' must be a positive integer, got {level}")
+        level = values["subdivision"]
     faces = len(mesh_data[3]) * int(level) ** 2
     if faces > 2 * tessellate.MAX_VERTICES:
         raise ValueError(f"displaced: subdivision level {level} gives {faces:,} triangles, more "
@@ -77,44 +113,26 @@ def _mesh_level(mesh_data, props, edge_length) -> int:
 class Displaced(mi.Mesh):
     """True displacement: a tessellated mesh P = S + scale (h - midlevel) n."""
 
-    def __init__(self, props: mi.Properties):
+    def __init__(self, props: mi.Properties, values: dict):
         self.sensors = take_sensors(props)   # the sensors referenced for dicing
-        base_name = props.get("base", "mesh" if "filename" in props else "sphere")
-        height = props.get("height", None)
-        if height is not None and not isinstance(height, mi.Texture):
-            raise ValueError("displaced: 'height' must be a nested texture")
-        scale = float(props.get("scale", 0.1))
-        midlevel = float(props.get("midlevel", 0.0))
-        for key, val in (("scale", scale), ("midlevel", midlevel)):
-            if not math.isfinite(val):
-                raise ValueError(f"displaced: '{key}' must be finite, got {val}")
-        resolution = props.get("resolution", None)
-        edge_length = props.get("edge_length", None)
+        base_name = surfaces.base_name("displaced", values, "sphere")
+        height, scale, midlevel = values["height"], values["scale"], values["midlevel"]
+        resolution, edge_length = values["resolution"], values["edge_length"]
         uniform_keys = [k for k in ("resolution", "edge_length", "subdivision") if k in props]
-        if "tessellation" in props:  # explicit switch: the other mode's settings may stay
-            mode = props.get("tessellation")
-            if mode not in ("uniform", "dicing"):
-                raise ValueError(f"displaced: 'tessellation' must be 'uniform' or 'dicing', got {mode!r}")
-        else:
-            mode = "dicing" if "dicing_rate" in props else "uniform"
+        mode = values["tessellation"]   # explicit: the other mode's settings may stay
+        if mode is None:
+            mode = "uniform" if values["dicing_rate"] is None else "dicing"
             if mode == "dicing" and uniform_keys:
                 raise ValueError(f"displaced: 'dicing_rate' replaces {', '.join(map(repr, uniform_keys))}; "
                                  "give one or the other (or choose with 'tessellation')")
+            if mode == "uniform" and "offscreen_dicing_scale" in props:
+                raise ValueError("displaced: 'offscreen_dicing_scale' needs 'dicing_rate'")
         self.dicing = mode == "dicing"
         if self.dicing:
-            if "dicing_rate" not in props:
+            if values["dicing_rate"] is None:
                 raise ValueError("displaced: tessellation 'dicing' needs 'dicing_rate'")
-            rate, off = dicing.check_rates(props.get("dicing_rate"),
-                                           props.get("offscreen_dicing_scale", 4.0))
-            for k in uniform_keys:  # read (unused here), so Mitsuba does not call them typos
-                props.get(k)
+            rate, off = values["dicing_rate"], values["offscreen_dicing_scale"]
             resolution = edge_length = None
-        elif "offscreen_dicing_scale" in props and "tessellation" not in props:
-            raise ValueError("displaced: 'offscreen_dicing_scale' needs 'dicing_rate'")
-        else:
-            for k in ("dicing_rate", "offscreen_dicing_scale"):
-                if k in props:
-                    props.get(k)
         # load_dict/XML hand over a double-precision transform; the mesh is float32
         to_world = mi.ScalarTransform4f(mi.ScalarMatrix4f(np.array(
             props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float32)))
@@ -123,21 +141,19 @@ class Displaced(mi.Mesh):
             warn_if_srgb(height, "displaced")
 
         if base_name == "mesh":
-            if "filename" not in props:
-                raise ValueError("displaced: base 'mesh' needs a 'filename' (PLY/OBJ with UVs)")
-            mesh_data = load_uv_mesh(props.get("filename"))
+            mesh_data = load_uv_mesh(values["filename"])
             base = None
-            grid = None if self.dicing else _mesh_level(mesh_data, props, edge_length)
+            grid = None if self.dicing else _mesh_level(mesh_data, values)
             # constant per load (every re-displacement reuses them): position classes, the
             # interpolated frame, the uniform refinement's topology
             self._weld = tessellate.weld_classes(mesh_data[0])
             self._frames = tessellate.vertex_frames(*mesh_data)
-            self._directions = _mesh_directions(mesh_data, self._weld, props,
+            self._directions = _mesh_directions(mesh_data, self._weld, values["split_normals"],
                                                 props.id() or "(no id)")
             if not self.dicing:
                 self._topology = tessellate.subdivision_topology(mesh_data[3], self._weld, grid)
         else:
-            base = surfaces.make_base(base_name, **surfaces.base_params(base_name, props))
+            base = surfaces.make_base(base_name, **surfaces.base_params("displaced", base_name, values))
             if "split_normals" in props:
                 raise ValueError(f"displaced: 'split_normals' applies to base 'mesh' only "
                                  f"(base is {base_name!r})")
@@ -408,12 +424,12 @@ class Displaced(mi.Mesh):
                 f"vertices={s.get('vertices')}, faces={s.get('faces')}]")
 
 
-def _mesh_directions(mesh_data, weld: np.ndarray, props, name: str) -> np.ndarray:
+def _mesh_directions(mesh_data, weld: np.ndarray, split_normals: bool, name: str) -> np.ndarray:
     """(V, 3) displacement direction of each base vertex: the welded normal (one per
     position, watertight), or with ``split_normals`` the vertex's own normal, warning once
     (here, at load) when copies of a position disagree and the surface will crack."""
     pos, nrm, _, faces = mesh_data
-    if not boolean("displaced", props, "split_normals", False):
+    if not split_normals:
         return tessellate.welded_normals(pos, nrm, faces, weld)
     split = tessellate.split_positions(nrm, weld)
     if split:
@@ -448,4 +464,4 @@ def _unit_edges(grid) -> dict:
 
 
 def register():
-    mi.register_shape("displaced", constructor("displaced", Displaced))
+    mi.register_shape("displaced", constructor(SPEC, Displaced))

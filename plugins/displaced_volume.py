@@ -2,34 +2,7 @@
 displacement maps (:mod:`mi_displace.volume`), for ``sigma_t`` of a ``heterogeneous`` medium
 under ``volpath`` and for the ``volume_slicer`` integrator.
 
-.. code-block:: xml
-
-    <volume type="displaced_volume" id="walnut">
-        <string name="filename" value="../data/volumes/walnut_128x96x114_uint16.raw"/>  <!-- raw + .json, or .vol -->
-        <!-- or <string name="procedural" value="piggy_bank"/> <integer name="resolution" value="96"/> -->
-        <string name="mode" value="reference"/>          <!-- reference: exact maps | approximation: D_k -->
-        <float name="tf_low" value="0.1"/> <float name="tf_high" value="0.6"/>
-        <float name="density_scale" value="20"/>          <!-- sigma_t at tau = 1, 1/world unit -->
-        <integer name="bits" value="16"/>                  <!-- D_k storage: 8, 16, 32 (float) -->
-        <float name="smoothing" value="1.5"/>              <!-- alpha smoothing, D_k voxels -->
-        <string name="composition" value="on_the_fly"/>    <!-- or precomputed -->
-        <integer name="composite_resolution" value="64"/>
-        <float name="bounds" value="1.0"/>                  <!-- optional: medium box >= [-b, b]^3 (animation) -->
-        <string name="map0_type" value="peel"/>            <!-- maps in forward order: map0, map1, ... -->
-        <float name="map0_angle" value="60"/>              <!-- any parameter of the primitive -->
-        <integer name="map0_resolution" value="64"/>       <!-- or map0_res_x/_y/_z -->
-        <transform name="map0_to_world"> ... </transform>  <!-- placement M of §6 -->
-    </volume>
-
-    <!-- the albedo of the same displaced object: a colour transfer read at the same pre-image -->
-    <volume type="displaced_volume" id="walnut_albedo">
-        <string name="output" value="albedo"/>            <!-- sigma_t (default) | albedo -->
-        <ref name="source" id="walnut"/>                   <!-- share its object, maps, mode -->
-        <rgb name="albedo_low" value="0.8, 0.5, 0.3"/>     <!-- albedo where F <= albedo_range_low -->
-        <rgb name="albedo_high" value="0.9, 0.85, 0.7"/>   <!-- ... where F >= albedo_range_high -->
-        <float name="albedo_range_low" value="0.1"/> <float name="albedo_range_high" value="0.6"/>
-        <!-- F: the object itself, or a second field: albedo_filename / albedo_procedural -->
-    </volume>
+(:data:`SPEC` declares its parameters.)
 
 ``output="albedo"`` makes it the ``albedo`` of a ``heterogeneous`` medium (and of the
 ``volume_slicer``): :class:`~mi_displace.volume.field.AlbedoField`.  With ``source`` it shares
@@ -50,116 +23,176 @@ from __future__ import annotations
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.volume import maps as primitives
-from mi_displace.volume.displacement import DisplacementChain, PlacedMap
-from mi_displace.volume.field import AlbedoField, DisplacedVolume
+from mi_displace.volume import EXAMPLE_XML, maps as primitives
+from mi_displace.volume.displacement import BITS, DisplacementChain, PlacedMap
+from mi_displace.volume.field import MODES, AlbedoField, DisplacedVolume
 from mi_displace.volume.objects import load_raw, load_vol, piggy_bank
 from mi_displace.core.collector import collector_paused
+from mi_displace.core.properties import Param, PluginSpec
 from mi_displace.plugins._guard import constructor
 
 MAX_MAPS = 32
 OUTPUTS = ("sigma_t", "albedo")
+PROCEDURAL = ("piggy_bank",)
+_GREY = (0.8, 0.8, 0.8)
 
 
-def _object(props, prefix=""):
+def _object_params(prefix: str, what: str) -> tuple[Param, ...]:
+    """The parameters of an object volume (``{prefix}filename`` etc.), ``what`` it is."""
+    return (
+        Param(f"{prefix}filename", "string", None, f"{what}: a .raw with its .json sidecar, or a "
+              "Mitsuba .vol"),
+        Param(f"{prefix}procedural", "string", None, f"{what}: a procedural object instead",
+              choices=PROCEDURAL),
+        Param(f"{prefix}resolution", "int", 96, f"{what}, procedural: voxels per side", low=8, high=512),
+    )
+
+
+SPEC = PluginSpec(
+    "displaced_volume", "volume",
+    "An object volume seen through discontinuous displacement maps (§6), for `sigma_t` (or, "
+    "with `output=\"albedo\"`, the `albedo`) of a `heterogeneous` medium under `volpath`, and "
+    "for the `volume_slicer` integrator.  The maps apply in forward order `map0`, `map1`, …; "
+    "each sample reads the object at its pre-image, exactly (`reference`) or through the "
+    "sampled inverse maps D_k (`approximation`).  Registered through `mi.register_texture` "
+    "(Mitsuba has no `register_volume`); `<volume type=...>` works.",
+    (
+        Param("output", "string", "sigma_t", "what the volume evaluates", choices=OUTPUTS),
+        Param("source", "volume", None, "output=albedo: a `displaced_volume` (sigma_t) whose "
+              "object, maps and mode this one shares (`<ref>`)"),
+        *_object_params("", "the object"),
+        Param("mode", "string", "reference", "exact pre-images or the sampled D_k", choices=MODES),
+        Param("tf_low", "float", 0.1, "transfer ramp start on the normalised density (< tf_high; "
+              "tau(0) = 0 keeps empty space empty)", low=0, high=1, open_high=True),
+        Param("tf_high", "float", 0.6, "transfer ramp end on the normalised density"),
+        Param("density_scale", "float", 20.0, "sigma_t at tau = 1", unit="1/world", low=0,
+              open_low=True),
+        Param("bits", "int", 16, "D_k storage: 8, 16 or 32 (float)", low=min(BITS), high=max(BITS)),
+        Param("smoothing", "float", 1.5, "alpha smoothing", unit="D_k voxels", low=0),
+        Param("composition", "string", DisplacementChain.COMPOSITIONS[0], "compose the maps per "
+              "lookup or once into one table", choices=DisplacementChain.COMPOSITIONS),
+        Param("composite_resolution", "int", 64, "precomputed: composite table voxels per side",
+              low=1, high=1024),
+        Param("bounds", "float", None, "medium box at least [-bounds, bounds]³ (room for edits "
+              "that grow the object)", unit="world", low=0, open_low=True),
+        Param("albedo_low", "rgb", _GREY, "output=albedo: albedo where F <= albedo_range_low"),
+        Param("albedo_high", "rgb", _GREY, "output=albedo: albedo where F >= albedo_range_high"),
+        Param("albedo_range_low", "float", None, "output=albedo: F at albedo_low (default tf_low)"),
+        Param("albedo_range_high", "float", None, "output=albedo: F at albedo_high (default tf_high)"),
+        *_object_params("albedo_", "output=albedo: a second field F (default: the object)"),
+        Param("map<i>_type", "string", None, "map i's primitive (i = 0, 1, … in forward order, "
+              f"at most {MAX_MAPS})", choices=tuple(primitives.PRIMITIVES)),
+        Param("map<i>_resolution", "int", None, "map i's D_k voxels per side (default: the "
+              "primitive's)", low=1, high=4096),
+        *(Param(f"map<i>_res_{axis}", "int", None, f"map i's D_k voxels along {axis}", low=1,
+                high=4096) for axis in "xyz"),
+        Param("map<i>_to_world", "transform", None, "map i's placement M (§6)", editable=True),
+        Param("map<i>_<parameter>", "float", None, "a parameter of map i's primitive: "
+              + "; ".join(f"{k}: {', '.join(v)}" for k, v in primitives.PRIMITIVES.items())
+              + " (angles in degrees)", editable=True),
+    ),
+    example=EXAMPLE_XML,
+    nested="`source`: a `<ref>` to a sigma_t `displaced_volume`",
+    stats="texture_bytes, maps",
+    limits="`to_world` is refused: the object fills its own box (raw: centred, longest side 1 "
+           "world unit; .vol: its header's box); "
+           "edits that grow the object past the medium box fixed at load are refused (give "
+           "`bounds`).  Map parameters are editable, not differentiable.",
+)
+
+
+def _object(values: dict, prefix=""):
     """The object volume from ``{prefix}filename`` or ``{prefix}procedural`` (+ ``resolution``)."""
-    filename = props.get(f"{prefix}filename", None)
-    procedural = props.get(f"{prefix}procedural", None)
+    filename, procedural = values[f"{prefix}filename"], values[f"{prefix}procedural"]
     if (filename is None) == (procedural is None):
         raise ValueError(f"displaced_volume: give exactly one of '{prefix}filename' (.raw + .json sidecar, "
                          f"or Mitsuba .vol) and '{prefix}procedural' ('piggy_bank')")
     if procedural is not None:
-        if procedural != "piggy_bank":
-            raise ValueError(f"displaced_volume: {prefix}procedural {procedural!r} is unknown (piggy_bank)")
-        return piggy_bank(int(props.get(f"{prefix}resolution", 96)))
+        return piggy_bank(values[f"{prefix}resolution"])
     path = str(mi.file_resolver().resolve(filename))
     return load_vol(path) if path.endswith(".vol") else load_raw(path)
 
 
-def _volume(props) -> DisplacedVolume:
-    """The object and its displacement chain from the properties (module docstring)."""
+def _volume(values: dict) -> DisplacedVolume:
+    """The object and its displacement chain from the read values (module docstring)."""
     chain = DisplacementChain(
-        _maps(props), bits=int(props.get("bits", 16)), smoothing=float(props.get("smoothing", 1.5)),
-        composition=props.get("composition", "on_the_fly"),
-        composite_resolution=[int(props.get("composite_resolution", 64))] * 3)
+        _maps(values), bits=values["bits"], smoothing=values["smoothing"],
+        composition=values["composition"],
+        composite_resolution=[values["composite_resolution"]] * 3)
     return DisplacedVolume(
-        _object(props), chain, mode=props.get("mode", "reference"), tf_low=float(props.get("tf_low", 0.1)),
-        tf_high=float(props.get("tf_high", 0.6)), density_scale=float(props.get("density_scale", 20.0)))
+        _object(values), chain, mode=values["mode"], tf_low=values["tf_low"],
+        tf_high=values["tf_high"], density_scale=values["density_scale"])
 
 
-def _medium_box(props, volume: DisplacedVolume) -> tuple[np.ndarray, np.ndarray]:
+def _medium_box(values: dict, volume: DisplacedVolume) -> tuple[np.ndarray, np.ndarray]:
     """The proxy box, grown to [-bounds, bounds]^3 when ``bounds`` is given."""
     lo, hi = volume.proxy_box()
-    bounds = props.get("bounds", None)
+    bounds = values["bounds"]
     if bounds is not None:
-        if not float(bounds) > 0:
-            raise ValueError(f"displaced_volume: 'bounds' must be > 0, got {bounds}")
-        lo, hi = np.minimum(lo, -float(bounds)), np.maximum(hi, float(bounds))
+        lo, hi = np.minimum(lo, -bounds), np.maximum(hi, bounds)
     return lo, hi
 
 
-def _maps(props) -> list[PlacedMap]:
+def _maps(values: dict) -> list[PlacedMap]:
+    """The maps ``map0``, ``map1``, … of the read values, checked to be consecutive, each with
+    a type, and with parameters of that type only."""
+    kinds = values["map<i>_type"]
+    count = len(kinds)
+    if count > MAX_MAPS:
+        raise ValueError(f"displaced_volume: at most {MAX_MAPS} maps, got {count}")
+    if sorted(kinds) != list(range(count)):
+        missing = min(set(range(count + 1)) - set(kinds))
+        raise ValueError(f"displaced_volume: parameter 'map{missing}_type' is missing (maps are "
+                         f"numbered 0, 1, … without gaps; given: {sorted(kinds)})")
+    params = values["map<i>_<parameter>"]
+    for family in (name for name in values if name.startswith("map<i>_") and name != "map<i>_type"):
+        for index in values[family]:
+            i, rest = index if isinstance(index, tuple) else (index, family.removeprefix("map<i>_"))
+            if i not in kinds:
+                raise ValueError(f"displaced_volume: parameter 'map{i}_{rest}' needs 'map{i}_type'")
+            if isinstance(index, tuple) and rest not in primitives.PRIMITIVES[kinds[i]]:
+                raise ValueError(f"displaced_volume: parameter 'map{i}_{rest}' is not one of "
+                                 f"{kinds[i]}'s ({', '.join(primitives.PRIMITIVES[kinds[i]])})")
     out = []
-    for i in range(MAX_MAPS + 1):
-        key = f"map{i}_type"
-        if not (key in props):
-            break
-        if i == MAX_MAPS:
-            raise ValueError(f"displaced_volume: at most {MAX_MAPS} maps")
-        kind = props.get(key)
-        if kind not in primitives.PRIMITIVES:
-            raise ValueError(f"displaced_volume: {key} {kind!r} is not one of {', '.join(primitives.PRIMITIVES)}")
-        params = {name: props.get(f"map{i}_{name}") for name in primitives.PRIMITIVES[kind]
-                  if (f"map{i}_{name}" in props)}
+    for i in range(count):
+        kind = kinds[i]
         res = list(primitives.DEFAULT_RESOLUTION[kind])
-        if (f"map{i}_resolution" in props):
-            res = [int(props.get(f"map{i}_resolution"))] * 3
+        if i in values["map<i>_resolution"]:
+            res = [values["map<i>_resolution"][i]] * 3
         for a, axis in enumerate("xyz"):
-            if (f"map{i}_res_{axis}" in props):
-                res[a] = int(props.get(f"map{i}_res_{axis}"))
-        to_world = None
-        if (f"map{i}_to_world" in props):
-            to_world = np.array(props.get(f"map{i}_to_world").matrix, dtype=float).reshape(4, 4)
-        out.append(PlacedMap(kind, params, to_world, res))
+            res[a] = values[f"map<i>_res_{axis}"].get(i, res[a])
+        to_world = values["map<i>_to_world"].get(i)
+        if to_world is not None:
+            to_world = np.array(to_world.matrix, dtype=float).reshape(4, 4)
+        out.append(PlacedMap(kind, {name: v for (j, name), v in params.items() if j == i},
+                             to_world, res))
     return out
 
 
-def _rgb(props, key, default):
-    """An RGB property (``<rgb>`` or a grey ``<float>``) as a (3,) array."""
-    if not (key in props):
-        return np.asarray(default, float)
-    value = props.get(key)
-    if isinstance(value, (int, float)):
-        return np.full(3, float(value))
-    return np.array(tuple(mi.ScalarColor3f(value)), float)
-
-
-def _albedo(props, volume: DisplacedVolume) -> AlbedoField:
+def _albedo(values: dict, volume: DisplacedVolume) -> AlbedoField:
     """The colour transfer of ``output="albedo"`` (see :class:`AlbedoField`)."""
     field = None
-    if ("albedo_filename" in props) or ("albedo_procedural" in props):
-        field = _object(props, prefix="albedo_")
+    if values["albedo_filename"] is not None or values["albedo_procedural"] is not None:
+        field = _object(values, prefix="albedo_")
     value_range = None
-    if ("albedo_range_low" in props) or ("albedo_range_high" in props):
-        value_range = (float(props.get("albedo_range_low", volume.tf_low)),
-                       float(props.get("albedo_range_high", volume.tf_high)))
-    return AlbedoField(volume, _rgb(props, "albedo_low", (0.8, 0.8, 0.8)), _rgb(props, "albedo_high", (0.8, 0.8, 0.8)),
+    low, high = values["albedo_range_low"], values["albedo_range_high"]
+    if low is not None or high is not None:
+        value_range = (volume.tf_low if low is None else low, volume.tf_high if high is None else high)
+    return AlbedoField(volume, np.array(values["albedo_low"]), np.array(values["albedo_high"]),
                        value_range, field)
 
 
 class DisplacedVolumePlugin(mi.Volume):
     """sigma_t (or the albedo) of the displaced object (see the module docstring)."""
 
-    def __init__(self, props: mi.Properties):
+    def __init__(self, props: mi.Properties, values: dict):
         if "to_world" in props:   # it would be overwritten below by the medium box: refuse it
             raise ValueError("displaced_volume: parameter 'to_world' is not supported: the object "
                              "fills its own box (raw: centred, longest side 1 world unit; .vol: its "
                              "header's box; docs/volume.md, Conventions); place the maps with "
                              "map<i>_to_world and move the camera, not the object")
-        self.output = props.get("output", "sigma_t")
-        if self.output not in OUTPUTS:
-            raise ValueError(f"displaced_volume: output must be one of {OUTPUTS}, got {self.output!r}")
-        source = props.get("source", None)
+        self.output = values["output"]
+        source = values["source"]
         if source is not None:
             if getattr(source, "output", None) != "sigma_t":
                 raise ValueError("displaced_volume: 'source' must reference a displaced_volume with "
@@ -168,9 +201,9 @@ class DisplacedVolumePlugin(mi.Volume):
                 raise ValueError("displaced_volume: 'source' is for output=\"albedo\" only")
             volume, (lo, hi) = source.volume, source._box
         else:
-            volume = _volume(props)
-            lo, hi = _medium_box(props, volume)
-        self.albedo = _albedo(props, volume) if self.output == "albedo" else None
+            volume = _volume(values)
+            lo, hi = _medium_box(values, volume)
+        self.albedo = _albedo(values, volume) if self.output == "albedo" else None
         # Mitsuba's media clip sampling to the C++ bbox of the volume (its to_world applied to
         # the unit cube), not to a Python bbox() override: set it to the proxy box
         props["to_world"] = mi.ScalarTransform4f().translate(mi.ScalarPoint3f(lo)).scale(
@@ -256,4 +289,4 @@ class DisplacedVolumePlugin(mi.Volume):
 
 
 def register():
-    mi.register_texture("displaced_volume", constructor("displaced_volume", DisplacedVolumePlugin))
+    mi.register_texture("displaced_volume", constructor(SPEC, DisplacedVolumePlugin))

@@ -1,17 +1,6 @@
 """``<shape type="restored">``: a low-poly restored with a baked displacement map (paper 003 §5).
 
-.. code-block:: xml
-
-    <shape type="restored">
-        <string name="map" value="bake_out/d16.png"/>   <!-- any baked map with its sidecar -->
-        <string name="low" value="bake_out/low.obj"/>   <!-- optional: default from the sidecar -->
-        <string name="levels" value="auto"/>            <!-- or an integer: rounds of 1->4 -->
-        <float name="dicing_rate" value="1"/>           <!-- auto: pixels per micro-edge -->
-        <ref id="camera"/>                              <!-- optional: sensors for auto -->
-        <!-- or <integer name="split" value="3"/>: the uniform 1->N^2 pattern -->
-        <boolean name="keep_holes" value="true"/>       <!-- open low-polys: drop faces over void -->
-        <bsdf type="diffuse"/>
-    </shape>
+(:data:`SPEC` declares its parameters.)
 
 The mesh is built by :func:`mi_displace.bake.restore.restore` (Dr.Jit subdivision and
 displacement, alias-welded seams, recomputed normals) and uploaded into this ``mi.Mesh``.
@@ -36,29 +25,54 @@ import numpy as np
 from mi_displace.bake import formats
 from mi_displace.bake.levels import auto_levels
 from mi_displace.bake.meshdata import load_mesh
-from mi_displace.bake.restore import edge_splits, low_for_map, restore
-from mi_displace.plugins._guard import boolean, constructor, take_sensors
+from mi_displace.bake.restore import MAX_SPLIT, edge_splits, low_for_map, restore
+from mi_displace.core.properties import REQUIRED, Param, PluginSpec
+from mi_displace.plugins._guard import constructor, take_sensors
+
+SPEC = PluginSpec(
+    "restored", "shape",
+    "A low-poly restored with a baked displacement map (paper 003 §5): subdivided (1 -> 4 "
+    "rounds, or a uniform 1 -> N² split), displaced along the interpolated normal by the "
+    "map, seams welded across UV-chart aliases and normals recomputed.  `levels=\"auto\"` "
+    "derives the rounds from the map resolution and the projected size through the sensors "
+    "(those referenced with `<ref id=\"...\"/>`, else the scene's, given by "
+    "`mi_displace.fit_to_sensors`).  `traverse` exposes `displacement` (the map's texels, a "
+    "(H, W, 1) tensor in object units; editable, differentiable: an edit re-displaces the mesh).",
+    (
+        Param("map", "string", REQUIRED, "a baked map with its .json sidecar"),
+        Param("low", "string", None, "the low-poly (default: the one the map's sidecar names)"),
+        Param("levels", "int", 2, "subdivision rounds (1 -> 4 triangles each)", low=0, high=6, auto=True),
+        Param("split", "int", None, "instead of `levels`: a uniform 1 -> N² split", low=1, high=MAX_SPLIT),
+        Param("dicing_rate", "float", 1.0, "`levels=auto`: pixels per micro-edge", unit="px",
+              low=0, open_low=True),
+        Param("keep_holes", "bool", True, "open low-polys: drop the faces over void texels"),
+    ),
+    example="""<shape type="restored">
+    <string name="map" value="parts/bake_bunny/d16.png"/>
+    <integer name="levels" value="1"/>
+    <bsdf type="diffuse"/>
+</shape>""",
+    nested="one `bsdf`; sensors (`<ref id=\"camera\"/>`) for `levels=auto`",
+    stats="levels, split, rule (and the inputs of an auto rule), vertices, faces, bytes, "
+          "restore_s, build_s and the restore report",
+    limits="The map's sidecar must describe the low-poly (same UVs); `levels=auto` before "
+           "`fit_to_sensors` sizes from the map alone.",
+)
 
 
 class Restored(mi.Mesh):
     """Low-poly + map -> subdivided, displaced triangle mesh (object units of the low-poly)."""
 
-    def __init__(self, props: mi.Properties):
-        if "map" not in props:
-            raise ValueError("restored: needs a 'map' (a baked map with its .json sidecar)")
+    def __init__(self, props: mi.Properties, values: dict):
         self.sensors = take_sensors(props)   # the sensors referenced for levels="auto"
         resolver = mi.file_resolver()   # paths relative to the scene file
-        self.map_path = str(resolver.resolve(str(props.get("map"))))
-        low = str(resolver.resolve(str(props.get("low")))) if "low" in props else low_for_map(self.map_path)
-        levels = props.get("levels", 2)
-        self.auto = isinstance(levels, str) and levels.strip() == "auto"
-        if isinstance(levels, str) and not self.auto:
-            if not levels.strip().isdigit():
-                raise ValueError(f"restored: 'levels' must be an integer or 'auto', got {levels!r}")
-            levels = int(levels)
-        self.split = props.get("split", None)
-        self.dicing_rate = float(props.get("dicing_rate", 1.0))
-        self.keep_holes = boolean("restored", props, "keep_holes", True)
+        self.map_path = str(resolver.resolve(values["map"]))
+        low = str(resolver.resolve(values["low"])) if values["low"] is not None else low_for_map(self.map_path)
+        levels = values["levels"]
+        self.auto = levels == "auto"
+        self.split = values["split"]
+        self.dicing_rate = values["dicing_rate"]
+        self.keep_holes = values["keep_holes"]
         self.low = load_mesh(low, "low-poly")
         self.map_shape = (int(formats.read_metadata(self.map_path)["height"]),
                           int(formats.read_metadata(self.map_path)["width"]))
@@ -139,4 +153,4 @@ class Restored(mi.Mesh):
 
 
 def register():
-    mi.register_shape("restored", constructor("restored", Restored))
+    mi.register_shape("restored", constructor(SPEC, Restored))

@@ -1,24 +1,6 @@
 """``<shape type="slicing">``: displacement mapping by slicing the displacement volume (§3).
 
-.. code-block:: xml
-
-    <shape type="slicing">
-        <string name="base" value="torus"/>        <!-- plane | sphere | cylinder | torus | mesh -->
-        <float name="major_radius" value="1"/>  <float name="minor_radius" value="0.4"/>
-        <integer name="resolution" value="64"/>     <!-- base polygons along u (plane: 1) -->
-        <!-- or: <string name="filename" value="base.obj"/> (PLY/OBJ with UVs) -->
-        <texture type="bricks" name="height"/>      <!-- D in [0, 1]: the α channel -->
-        <float name="scale" value="0.06"/>          <!-- maximum displacement [object units, as displaced] -->
-        <integer name="slices" value="25"/>          <!-- or <string name="slices" value="auto"/> -->
-        <ref name="sensor" id="camera"/>            <!-- needed by slices="auto" -->
-        <string name="direction" value="best"/>     <!-- a | b | c | best | screen -->
-        <string name="alpha" value="ramp"/>         <!-- basic (default for a) | ramp -->
-        <boolean name="ratio_scaling" value="true"/> <!-- §3.4 orthogonal count scaling -->
-        <boolean name="draw_base" value="false"/>   <!-- also draw the base polygons (opaque) -->
-        <boolean name="rasterise" value="true"/>    <!-- raster: z-buffer the slices (false: walk) -->
-        <boolean name="self_shadows" value="true"/> <!-- false: no walk towards the light -->
-        <bsdf type="diffuse"> ... </bsdf>            <!-- its textures are read at the slice uv -->
-    </shape>
+(:data:`SPEC` declares its parameters.)
 
 ``scale`` and ``slices`` are editable through ``mi.traverse`` (the slices are rebuilt).
 The shape itself is the boundary of the displacement volume (the proxy rays enter); its
@@ -34,52 +16,84 @@ the slice counts (what ``auto`` chose), triangles and bytes.
 """
 from __future__ import annotations
 
-import math
 import time
 
 import mitsuba as mi
 import numpy as np
 
 from mi_displace.core import surfaces
+from mi_displace.core.properties import REQUIRED, Param, PluginSpec
 from mi_displace.core.texture_height import check_texture_finite, warn_if_srgb
-from mi_displace.slicing.bsdf import SlicingBSDF, slice_count
+from mi_displace.slicing.bsdf import SlicingBSDF
+from mi_displace.slicing.trace import ALPHA_TESTS
 from mi_displace.vdm.mesostructure import nested_objects
 from mi_displace.slicing import geometry as geo
 from mi_displace.slicing.sliced import DIRECTIONS, SlicedVolume
-from mi_displace.plugins._guard import boolean, constructor
+from mi_displace.plugins._guard import constructor
+
+SPEC = PluginSpec(
+    "slicing", "shape",
+    "Displacement mapping by slicing the displacement volume (§3): the shape is the boundary "
+    "of the volume; its BSDF finds per ray the front-most slice fragment that passes the "
+    "α-test (D from the `height` texture) and is a Null pass-through where none does, so it "
+    "works under `raster` (slices z-buffered per frame) and `path` (walked by ray queries) "
+    "alike.  Self-shadows come from a second slice walk towards the light.",
+    (
+        surfaces.base_param("plane"), *surfaces.BASE_DIMENSIONS,
+        surfaces.resolution_param(None, "base polygons along u (default: 1 for a plane, else 64)"),
+        surfaces.BASE_FILENAME,
+        Param("height", "texture", REQUIRED, "D in [0, 1]: the α channel"),
+        Param("scale", "float", 0.1, "maximum displacement (as `displaced`'s scale)", unit="object",
+              low=0, open_low=True, editable=True),
+        Param("slices", "int", 25, "slices along the main direction (auto: from the sensor)",
+              low=1, high=geo.MAX_SLICES, auto=True, editable=True),
+        Param("sensor", "sensor", None, "the camera `slices=auto` sizes for (`<ref name=\"sensor\" "
+              "id=\"...\"/>`, declared before this shape)"),
+        Param("direction", "string", "best", "slice direction (a: parallel to the base, b/c: "
+              "orthogonal; best: per view; screen: view-aligned)", choices=DIRECTIONS),
+        Param("alpha", "string", None, "α-test (default: basic for direction a, else ramp)",
+              choices=ALPHA_TESTS),
+        Param("ratio_scaling", "bool", True, "§3.4 orthogonal slice-count scaling"),
+        Param("draw_base", "bool", False, "also draw the base polygons (opaque)"),
+        Param("rasterise", "bool", True, "under `raster`: z-buffer the slices (false: walk them)"),
+        Param("self_shadows", "bool", True, "walk the slices towards the light"),
+    ),
+    example="""<shape type="slicing">
+    <string name="base" value="plane"/>
+    <texture type="bricks" name="height"/>
+    <float name="scale" value="0.1"/>
+    <integer name="slices" value="8"/>
+    <bsdf type="diffuse"/>
+</shape>""",
+    nested="the `height` texture; at most one `bsdf` (the material, its textures read at the "
+           "slice uv; `diffuse` when none)",
+    stats="the slice counts per direction (what auto chose: slices_auto), triangles, bytes, build_s",
+    limits="Self-shadows and colour come from the slices, so they band at few slices; "
+           "`direction=screen` needs a parametric base.",
+)
 
 
 class Slicing(mi.Mesh):
     """Boundary of the displacement volume with the slicing BSDF (module docstring)."""
 
-    def __init__(self, props: mi.Properties):
+    def __init__(self, props: mi.Properties, values: dict):
         start = time.perf_counter()
-        base_name = props.get("base", "mesh" if "filename" in props else "plane")
-        height = props.get("height", None)
-        if not isinstance(height, mi.Texture):
-            raise ValueError("slicing: 'height' must be a nested texture (D in [0, 1])")
+        base_name = surfaces.base_name("slicing", values, "plane")
+        height, scale, slices = values["height"], values["scale"], values["slices"]
         check_texture_finite(height)
         warn_if_srgb(height, "slicing")
-        scale = float(props.get("scale", 0.1))
-        if not (math.isfinite(scale) and scale > 0):
-            raise ValueError(f"slicing: 'scale' must be a positive number, got {scale}")
-        slices = slice_count(props)
-        direction = str(props.get("direction", "best"))
-        if direction not in DIRECTIONS:
-            raise ValueError(f"slicing: 'direction' must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
-        alpha = str(props.get("alpha", "basic" if direction == "a" else "ramp"))
-        ratio_scaling = boolean("slicing", props, "ratio_scaling", True)
-        draw_base = boolean("slicing", props, "draw_base", False)
-        self.rasterise = boolean("slicing", props, "rasterise", True)
-        sensor = props.get("sensor", None)
-        if slices == "auto" and not isinstance(sensor, mi.Sensor):
+        direction = values["direction"]
+        alpha = values["alpha"] or ("basic" if direction == "a" else "ramp")
+        ratio_scaling, draw_base = values["ratio_scaling"], values["draw_base"]
+        self.rasterise = values["rasterise"]
+        sensor = values["sensor"]
+        if slices == "auto" and sensor is None:
             raise ValueError("slicing: slices='auto' needs the scene's camera: "
                              "<ref name=\"sensor\" id=\"...\"/> (declared before this shape)")
-        resolution = props.get("resolution", 1 if base_name == "plane" else 64)
-        params = surfaces.base_params(base_name, props)
+        resolution = values["resolution"] or (1 if base_name == "plane" else 64)
+        params = surfaces.base_params("slicing", base_name, values)
         to_world = np.array(props.get("to_world", mi.ScalarTransform4f()).matrix, np.float64)
-        filename = props.get("filename", None) if base_name == "mesh" else None
-        bm = geo.make_base_mesh(base_name, params, filename, resolution, to_world)
+        bm = geo.make_base_mesh(base_name, params, values["filename"], resolution, to_world)
         auto = slices == "auto"
         if auto:
             slices = geo.auto_slices(sensor, bm.bbox(scale), bm.world_scale(scale))
@@ -92,7 +106,7 @@ class Slicing(mi.Mesh):
         inner = mi.Properties("slicing")
         inner["height"] = height
         inner["material"] = material
-        inner["self_shadows"] = bool(props.get("self_shadows", True))
+        inner["self_shadows"] = values["self_shadows"]
         bsdf = SlicingBSDF(inner, volume)
         props[bsdfs[0][0] if bsdfs else "bsdf"] = bsdf
         walls = volume.walls
@@ -142,4 +156,4 @@ class Slicing(mi.Mesh):
 
 
 def register():
-    mi.register_shape("slicing", constructor("slicing", Slicing))
+    mi.register_shape("slicing", constructor(SPEC, Slicing))

@@ -8,7 +8,7 @@ from __future__ import annotations
 import mitsuba as mi
 
 from mi_displace.core.properties import Param, PluginSpec
-from mi_displace.vdm import build, mesostructure
+from mi_displace.vdm import EXAMPLE_XML, build, mesostructure
 from mi_displace.vdm.bsdfs import VDM
 from mi_displace.plugins._guard import constructor
 
@@ -42,19 +42,7 @@ SPEC = PluginSpec(
         Param("curvature_max", "float", None, "fixed upper end of the curvature range", unit="1/world"),
         Param("sensor", "sensor", None, "the sensor `res`/`theta` = auto size the table for"),
     ),
-    example="""<shape type="vdm_mesh">
-    <string name="base" value="torus"/>
-    <integer name="resolution" value="16"/>
-    <bsdf type="vdm">
-        <texture type="cells" name="height"/>
-        <float name="depth" value="0.03"/>
-        <integer name="res" value="16"/>
-        <integer name="theta" value="4"/>
-        <integer name="phi" value="8"/>
-        <integer name="curvatures" value="2"/>
-        <bsdf type="diffuse"/>
-    </bsdf>
-</shape>""",
+    example=EXAMPLE_XML,
     nested="one `bsdf` (the material; `diffuse` when none)",
     stats="res, theta, phi, curvatures, svd_terms, mvm_terms, auto, table_bytes, compressed_bytes, "
           "build_time_s, load_time_s, cached, tile_size, depth_tile, c_range_tile, n_curvatures",

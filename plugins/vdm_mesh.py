@@ -1,15 +1,5 @@
-"""``<shape type="vdm_mesh">``: a coarse base mesh that carries its curvature for VDM.
-
-.. code-block:: xml
-
-    <shape type="vdm_mesh">
-        <string name="base" value="torus"/>          <!-- plane | sphere | cylinder | torus -->
-        <float name="major_radius" value="1"/>
-        <float name="minor_radius" value="0.4"/>
-        <integer name="resolution" value="64"/>       <!-- cells along u (coarse!) -->
-        <!-- or: <string name="filename" value="mesh.obj"/> (PLY/OBJ with UVs) -->
-        <bsdf type="vdm"> ... </bsdf>
-    </shape>
+"""``<shape type="vdm_mesh">``: a coarse base mesh that carries its curvature for VDM
+(:data:`SPEC` declares its parameters).
 
 It is the undisplaced base (the reference surface of the paper) as an ordinary triangle
 mesh, plus per-vertex curvature tensors estimated *on this mesh* (the same estimator for
@@ -36,9 +26,29 @@ import numpy as np
 
 from mi_displace.core import surfaces, tessellate
 from mi_displace.core.mesh_io import load_uv_mesh
-from mi_displace.vdm import mesh_curvature
+from mi_displace.core.properties import PluginSpec
+from mi_displace.vdm import EXAMPLE_XML, mesh_curvature
 from mi_displace.plugins._guard import constructor
 from mi_displace.vdm.steps import FACE_FORMS
+
+SPEC = PluginSpec(
+    "vdm_mesh", "shape",
+    "The undisplaced base of view-dependent displacement mapping (the paper's reference "
+    "surface) as a coarse triangle mesh, with per-vertex curvature tensors estimated on this "
+    "mesh (the same estimator for parametric and file bases).  On construction it hands the "
+    "measured curvature range and tile size to its `vdm` BSDF, which builds its table for "
+    "exactly that range.",
+    (surfaces.base_param("sphere"), *surfaces.BASE_DIMENSIONS,
+     surfaces.resolution_param(64, "grid cells along u (coarse: the BSDF adds the detail)"),
+     surfaces.EDGE_LENGTH, surfaces.BASE_FILENAME),
+    example=EXAMPLE_XML,
+    nested="one `bsdf` (a `vdm`, `horizon` or `relief` BSDF receives the curvature range and "
+           "tile size; any other renders the plain base)",
+    stats="vertices, faces, curvature_min, curvature_max, build_s, and the attached BSDF's "
+          "numeric stats",
+    limits="The curvature is estimated per vertex on the mesh itself: a mesh whose faces share "
+           "no vertex positions has none (warns); open meshes warn (front faces only).",
+)
 
 
 def _columns(v) -> np.ndarray:
@@ -47,13 +57,14 @@ def _columns(v) -> np.ndarray:
     return np.stack([np.broadcast_to(np.asarray(c), (n,)) for c in v], 1)
 
 
-def base_geometry(props: mi.Properties):
-    """(positions, normals, uvs, faces) NumPy arrays of the undisplaced base (object space)."""
-    if "filename" in props:
-        return load_uv_mesh(props.get("filename"), "vdm_mesh")
-    name = props.get("base", "sphere")
-    base = surfaces.make_base(name, **surfaces.base_params(name, props))
-    nu, nv = tessellate.grid_resolution(base, props.get("resolution", 64), props.get("edge_length", None))
+def base_geometry(values: dict):
+    """(positions, normals, uvs, faces) NumPy arrays of the undisplaced base (object space),
+    from the read :data:`SPEC` ``values``."""
+    name = surfaces.base_name("vdm_mesh", values, "sphere")
+    if name == "mesh":
+        return load_uv_mesh(values["filename"], "vdm_mesh")
+    base = surfaces.make_base(name, **surfaces.base_params("vdm_mesh", name, values))
+    nu, nv = tessellate.grid_resolution(base, values["resolution"], values["edge_length"])
     t = tessellate.displace_parametric(base, None, 0.0, 0.0, nu, nv)
     return (_columns(t.positions), _columns(t.normals), _columns(t.texcoords), _columns(t.faces))
 
@@ -61,9 +72,9 @@ def base_geometry(props: mi.Properties):
 class VDMMesh(mi.Mesh):
     """The coarse reference surface with per-vertex curvature tensors (attributes)."""
 
-    def __init__(self, props: mi.Properties):
+    def __init__(self, props: mi.Properties, values: dict):
         start = time.perf_counter()
-        obj_pos, obj_nrm, uvs, faces = base_geometry(props)
+        obj_pos, obj_nrm, uvs, faces = base_geometry(values)
         m = np.array(props.get("to_world", mi.ScalarTransform4f()).matrix, dtype=np.float64)
         pos = obj_pos @ m[:3, :3].T + m[:3, 3]
         nrm = obj_nrm @ np.linalg.inv(m[:3, :3])
@@ -89,7 +100,7 @@ class VDMMesh(mi.Mesh):
             warnings.warn(self.curvature_warning)
             mi.Log(mi.LogLevel.Warn, self.curvature_warning)
         self.open_warning = None
-        if "filename" in props and (edges := mesh_curvature.open_edge_count(obj_pos, faces)):
+        if values["filename"] is not None and (edges := mesh_curvature.open_edge_count(obj_pos, faces)):
             self.open_warning = (
                 f"vdm_mesh {props.id() or ''!r}: the mesh is open ({edges} boundary edges): "
                 "vdm, horizon and relief shade front faces only, so a surface seen from behind "
@@ -119,4 +130,4 @@ class VDMMesh(mi.Mesh):
 
 
 def register():
-    mi.register_shape("vdm_mesh", constructor("vdm_mesh", VDMMesh))
+    mi.register_shape("vdm_mesh", constructor(SPEC, VDMMesh))

@@ -145,8 +145,10 @@ CASES = {
         "misspelt": (_vdm_mesh(lambda t: {"resolutoin": 8}), "resolutoin"),
         "wrong_type": (_vdm_mesh(lambda t: {"radius": "big"}), "radius"),
         "non_finite": (_vdm_mesh(lambda t: {"radius": NAN}), "radius"),
-        "missing_file": (_vdm_mesh(lambda t: {"filename": _missing(t, ".ply")}), "no_such_file.ply"),
-        "garbage_file": (_vdm_mesh(lambda t: {"filename": _garbage(t, ".ply")}), "garbage.ply"),
+        "missing_file": (_vdm_mesh(lambda t: {"base": "mesh", "filename": _missing(t, ".ply")}),
+                         "no_such_file.ply"),
+        "garbage_file": (_vdm_mesh(lambda t: {"base": "mesh", "filename": _garbage(t, ".ply")}),
+                         "garbage.ply"),
     },
     "vdm": {
         "misspelt": (_bsdf("vdm", lambda t: {"svd_term": 8}), "svd_term"),
@@ -312,16 +314,17 @@ def test_bad_input_is_one_clear_error(variant, tmp_path, kernels, plugin, case, 
 
 def test_boolean_strings_parse_as_booleans(variant, tmp_path, monkeypatch):
     """``bool("false")`` is True: a string ``false`` (load_dict, ``-D``) must switch off."""
-    from mi_displace.plugins._guard import boolean
+    from mi_displace.core.properties import Param, PluginSpec
 
+    spec = PluginSpec("vdm", "bsdf", "", (Param("flag", "bool", True, ""),))
     props = mi.Properties()
     for text, expected in (("false", False), ("False", False), (" no ", False), ("0", False),
                            ("true", True), ("TRUE", True), ("yes", True)):
         props["flag"] = text
-        assert boolean("vdm", props, "flag", not expected) is expected, text
+        assert spec.read(props)["flag"] is expected, text
     props["flag"] = 0
-    assert boolean("vdm", props, "flag", True) is False
-    assert boolean("vdm", mi.Properties(), "flag", True) is True    # the default
+    assert spec.read(props)["flag"] is False
+    assert spec.read(mi.Properties())["flag"] is True    # the default
     monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
     small = {"res": 8, "theta": 4, "phi": 8, "curvatures": 1, "svd_terms": 4, "mvm_terms": 2}
     for text, expected in (("false", False), ("true", True)):

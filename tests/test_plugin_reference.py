@@ -113,3 +113,56 @@ def test_required_parameters_are_named(variant):
                 with pytest.raises(ValueError, match=f"{spec.plugin}: parameter '{param.name}' is required"):
                     spec.read(mi.Properties(spec.plugin))
                 break
+
+
+def test_every_registered_plugin_is_declared(variant, monkeypatch):
+    """Each plugin module declares its plugins (``SPEC``, or ``SPECS`` for several) and
+    registers nothing that its declarations do not describe."""
+    import importlib
+
+    from mi_displace.core.properties import PluginSpec
+    from mi_displace.plugins import PLUGIN_MODULES
+
+    _specs()
+    for name in PLUGIN_MODULES:
+        module = importlib.import_module(name)
+        specs = getattr(module, "SPECS", None) or (getattr(module, "SPEC", None),)
+        assert all(isinstance(s, PluginSpec) for s in specs), f"{name} declares no SPEC"
+        registered = []
+        for kind in ("shape", "bsdf", "texture", "integrator"):
+            monkeypatch.setattr(mi, f"register_{kind}", lambda plugin, make: registered.append(plugin))
+        module.register()
+        assert registered and set(registered) <= {s.plugin for s in specs}, (name, registered)
+    assert len({s.plugin for s in _specs()}) == len(_specs())
+
+
+def test_a_parameter_family_is_read_by_index(variant):
+    from mi_displace.core.properties import Param, PluginSpec
+
+    spec = PluginSpec("p", "volume", "", (Param("map<i>_type", "string", None, "", choices=("a", "b")),
+                                          Param("map<i>_<name>", "float", None, "", low=0)))
+    props = mi.Properties("p")
+    props["map0_type"], props["map1_type"], props["map1_size"] = "a", "b", 2
+    assert spec.read(props) == {"map<i>_type": {0: "a", 1: "b"}, "map<i>_<name>": {(1, "size"): 2.0}}
+    props["map0_size"] = -1.0
+    with pytest.raises(ValueError, match=r"^p: parameter 'map0_size' must lie in \[0, inf\), got -1.0$"):
+        spec.read(props)
+
+
+PIGGY = {"type": "displaced_volume", "procedural": "piggy_bank", "resolution": 16, "map0_type": "peel"}
+
+
+@pytest.mark.parametrize("scene, message", [
+    ({**PIGGY, "map0_bogus": 1.0}, "displaced_volume: parameter 'map0_bogus' is not one of peel's"),
+    ({**PIGGY, "map2_type": "wave"}, "displaced_volume: parameter 'map1_type' is missing"),
+    ({**PIGGY, "map1_amount": 0.1}, "displaced_volume: parameter 'map1_amount' needs 'map1_type'"),
+    ({"type": "displaced", "base": "torus", "radius": 2.0},
+     "displaced: parameter 'radius' does not apply to base 'torus'"),
+    ({"type": "ddm", "base": "plane", "filename": "tile.obj"},
+     "ddm: parameter 'filename' applies to base 'mesh' or 'teapot' only"),
+])
+def test_family_and_base_parameters_are_named(variant, scene, message):
+    """A parameter declared through a family or the shared base declaration, given where it
+    does not belong, is one line naming it (not Mitsuba's "unreferenced property")."""
+    with pytest.raises(Exception, match=re.escape(message)):
+        mi.load_dict(scene)

@@ -16,7 +16,9 @@ so Mitsuba's own "unreferenced property" check still catches a misspelt paramete
 """
 from __future__ import annotations
 
+import dataclasses
 import math
+import re
 from dataclasses import dataclass, field
 
 import mitsuba as mi
@@ -37,7 +39,10 @@ class Param:
     """One plugin parameter.
 
     Attributes:
-        name: the XML / ``load_dict`` name.
+        name: the XML / ``load_dict`` name; a *family* of parameters when it holds the
+            placeholders ``<i>`` (an index: digits) and optionally one other ``<word>`` (any
+            lower-case name), e.g. ``map<i>_type``, ``map<i>_<parameter>`` (see
+            :meth:`PluginSpec.read`).
         type: one of :data:`TYPES` (``float`` accepts integers; ``int`` accepts integral floats;
             ``float|volume`` a number or a nested / referenced volume).
         default: the value when absent (:data:`REQUIRED`: it must be given; ``None``: optional).
@@ -66,6 +71,14 @@ class Param:
     def __post_init__(self):
         if self.type not in TYPES:
             raise TypeError(f"Param {self.name!r}: unknown type {self.type!r}")
+
+    def pattern(self) -> re.Pattern | None:
+        """The regular expression of a family's names (``None``: a single parameter)."""
+        if "<" not in self.name:
+            return None
+        parts = re.split(r"(<\w+>)", self.name)
+        return re.compile("".join(r"(\d+)" if part == "<i>" else r"([a-z][a-z0-9_]*)"
+                                  if part.startswith("<") else re.escape(part) for part in parts))
 
     def range_text(self) -> str:
         """The accepted values, as the reference prints them."""
@@ -162,13 +175,29 @@ class PluginSpec:
     def read(self, props: mi.Properties) -> dict:
         """Every declared parameter's value from ``props`` (defaults filled in).
 
+        A family (:class:`Param` ``name`` with placeholders) reads every property whose name
+        fits it and that no single parameter or earlier family claims, as a dict keyed by
+        the index (``<i>`` alone) or by ``(index, word)``: ``{0: "peel"}``,
+        ``{(0, "angle"): 60.0}``; its errors name the property (``'map0_angle'``).
+
         Raises:
             ValueError: one line, ``"<plugin>: parameter '<name>' must be ..."``, for the
                 first missing required, mistyped or out-of-range parameter.
         """
         out = {}
+        claimed = {p.name for p in self.all_params() if p.pattern() is None}
         for p in self.all_params():
-            if p.name in props:
+            pattern = p.pattern()
+            if pattern is not None:
+                out[p.name] = {}
+                for key in props.keys():
+                    found = None if key in claimed else pattern.fullmatch(key)
+                    if found:
+                        claimed.add(key)
+                        index = tuple(int(g) if g.isdigit() else g for g in found.groups())
+                        value = dataclasses.replace(p, name=key).convert(self.plugin, props.get(key))
+                        out[p.name][index[0] if len(index) == 1 else index] = value
+            elif p.name in props:
                 out[p.name] = p.convert(self.plugin, props.get(p.name))
             elif p.default is REQUIRED:
                 raise ValueError(f"{self.plugin}: parameter {p.name!r} is required ({p.doc})")

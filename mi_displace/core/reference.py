@@ -1,7 +1,8 @@
 """The plugin reference (``docs/plugins.md``) generated from the plugins' declarations.
 
-One source of truth: each converted plugin module holds a
-:class:`~mi_displace.core.properties.PluginSpec` named ``SPEC``; this module renders them in
+One source of truth: each plugin module holds a
+:class:`~mi_displace.core.properties.PluginSpec` named ``SPEC`` (``SPECS``: a tuple, for a module
+registering several plugins); this module renders them in
 the form of Mitsuba's own plugin reference (Parameter / Type / Default / Range / Unit /
 Description, plus the ``traverse`` flags).  ``python -m mi_displace.core.reference`` rewrites
 the file; the test suite fails when it and the declarations disagree.
@@ -16,14 +17,15 @@ from mi_displace.core.properties import REQUIRED, PluginSpec
 
 
 def declared_specs() -> list[PluginSpec]:
-    """The ``SPEC`` of every plugin module that declares one, in registration order."""
+    """The declarations of every plugin module, in registration order: its ``SPECS`` (a
+    module registering several plugins) or its ``SPEC``."""
     from mi_displace.plugins import PLUGIN_MODULES
 
     specs = []
     for name in PLUGIN_MODULES:
-        spec = getattr(importlib.import_module(name), "SPEC", None)
-        if spec is not None:
-            specs.append(spec)
+        module = importlib.import_module(name)
+        spec = getattr(module, "SPEC", None)
+        specs.extend(getattr(module, "SPECS", () if spec is None else (spec,)))
     return specs
 
 
@@ -65,8 +67,10 @@ def markdown(specs: list[PluginSpec]) -> str:
     head = ["# Plugin reference", "",
             "Generated from the plugins' declarations by `python -m mi_displace.core.reference`; "
             "do not edit by hand.  Every parameter is checked when the plugin is built: a wrong "
-            "type or a value out of range is a one-line error naming the plugin and the parameter.",
-            "", "Plugins declared so far: " + ", ".join(f"`{s.plugin}`" for s in specs) + ".", ""]
+            "type or a value out of range is a one-line error naming the plugin and the parameter.  "
+            "A name with placeholders is a family: `map<i>_type` stands for `map0_type`, "
+            "`map1_type`, …, and `map<i>_<parameter>` for any parameter name in that place.",
+            "", "Plugins: " + ", ".join(f"`{s.plugin}`" for s in specs) + ".", ""]
     return "\n".join(head + [plugin_markdown(s) for s in specs])
 
 

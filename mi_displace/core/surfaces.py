@@ -17,6 +17,8 @@ from dataclasses import dataclass
 import drjit as dr
 import mitsuba as mi
 
+from mi_displace.core.properties import Param
+
 
 @dataclass
 class SurfaceSample:
@@ -263,12 +265,62 @@ BASES = {"plane": Plane, "sphere": Sphere, "cylinder": Cylinder, "torus": Torus}
 BASE_PARAMS = {"plane": (), "sphere": ("radius",), "cylinder": ("radius", "length"),
                "torus": ("major_radius", "minor_radius")}
 
+#: The declared dimensions of the parametric bases (each optional: the class default applies).
+BASE_DIMENSIONS = (
+    Param("radius", "float", None, "sphere, cylinder: radius (default 1)", unit="object",
+          low=0, open_low=True),
+    Param("length", "float", None, "cylinder: length along z (default 2)", unit="object",
+          low=0, open_low=True),
+    Param("major_radius", "float", None, "torus: radius of the centre circle (default 1)",
+          unit="object", low=0, open_low=True),
+    Param("minor_radius", "float", None, "torus: radius of the tube (default 0.4, < major_radius)",
+          unit="object", low=0, open_low=True),
+)
+#: A base mesh file instead of a parametric base.
+BASE_FILENAME = Param("filename", "string", None, "base `mesh`: a PLY/OBJ with UVs (relative "
+                      "to the scene file)")
+#: A target edge length instead of a grid resolution.
+EDGE_LENGTH = Param("edge_length", "float", None, "target edge length instead of `resolution`",
+                    unit="object", low=0, open_low=True)
 
-def base_params(name: str, props, extra: dict | None = None) -> dict:
-    """The parameters of base ``name`` that a plugin's ``props`` (``mi.Properties``) give,
-    as floats; ``extra`` adds bases of a plugin's own (``ddm``'s ``teapot``)."""
+
+def base_param(default: str, bases: tuple[str, ...] = (*BASES, "mesh")) -> Param:
+    """The ``base`` parameter of a plugin (``default`` when neither ``base`` nor
+    ``filename`` is given; a ``filename`` alone means ``mesh``)."""
+    return Param("base", "string", None, f"base surface (default: `mesh` with a `filename`, "
+                 f"else `{default}`)", choices=bases)
+
+
+def resolution_param(default: int | None, doc: str = "grid cells along u (v keeps the "
+                     "base's aspect ratio)") -> Param:
+    """The ``resolution`` parameter (``default`` ``None``: the plugin's rule, in ``doc``)."""
+    return Param("resolution", "int", default, doc, low=1, high=1 << 20)
+
+
+def base_name(plugin: str, values: dict, default: str, file_bases: tuple[str, ...] = ("mesh",)) -> str:
+    """The base a plugin's read ``values`` name (:func:`base_param`), checking that
+    ``filename`` goes with a base of ``file_bases`` and that ``mesh`` has one."""
+    name = values["base"] or ("mesh" if values["filename"] else default)
+    if values["filename"] is not None and name not in file_bases:
+        raise ValueError(f"{plugin}: parameter 'filename' applies to base "
+                         f"{' or '.join(map(repr, file_bases))} only (base is {name!r})")
+    if name == "mesh" and values["filename"] is None:
+        raise ValueError(f"{plugin}: base 'mesh' needs a 'filename' (PLY/OBJ with UVs)")
+    return name
+
+
+def base_params(plugin: str, name: str, values: dict, extra: dict | None = None) -> dict:
+    """The dimensions (:data:`BASE_DIMENSIONS`) of base ``name`` that a plugin's read
+    ``values`` give, as floats; ``extra`` adds bases of a plugin's own (``ddm``'s ``teapot``).
+
+    Raises:
+        ValueError: naming a dimension given for a base that has none of that name.
+    """
     names = {**BASE_PARAMS, **(extra or {})}.get(name, ())
-    return {k: float(props.get(k)) for k in names if k in props}
+    for p in BASE_DIMENSIONS:
+        if values.get(p.name) is not None and p.name not in names:
+            raise ValueError(f"{plugin}: parameter {p.name!r} does not apply to base {name!r}")
+    return {k: values[k] for k in names if values.get(k) is not None}
 
 
 def make_base(name: str, **params) -> BaseSurface:

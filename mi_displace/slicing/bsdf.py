@@ -8,14 +8,11 @@ it to the BSDF; the walks themselves are :mod:`mi_displace.slicing.sliced` and
 """
 from __future__ import annotations
 
-import math
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from mi_displace.slicing import depth_object as dobj
-from mi_displace.slicing import geometry as geo
 from mi_displace.vdm.frame import shading_interaction
 from mi_displace.vdm.mesostructure import MesostructureBSDF, read_shared
 
@@ -76,23 +73,6 @@ class SlicingBSDF(MesostructureBSDF):
 
     def to_string(self):
         return f"{type(self).__name__}[{self.model.stats}]"
-
-
-def slice_count(props: mi.Properties):
-    """``slices``: a positive integer or ``"auto"``."""
-    value = props.get("slices", 25)
-    if isinstance(value, str):
-        if value.strip().lower() == "auto":
-            return "auto"
-        try:
-            value = float(value)
-        except ValueError:
-            raise ValueError(f"slicing: 'slices' must be an integer or 'auto', got {value!r}") from None
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value == int(value)
-            and 1 <= value <= geo.MAX_SLICES):
-        raise ValueError(f"slicing: 'slices' must be an integer in [1, {geo.MAX_SLICES}] or "
-                         f"'auto', got {value!r}")
-    return int(value)
 
 
 class ViewColour(mi.Texture):

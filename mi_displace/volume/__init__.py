@@ -12,5 +12,6 @@ EXAMPLE_XML = """<volume type="displaced_volume" id="volume">
     <integer name="resolution" value="24"/>
     <string name="mode" value="approximation"/>
     <string name="map0_type" value="peel"/>
+    <float name="map0_angle" value="45"/>
     <integer name="map0_resolution" value="16"/>
 </volume>"""

@@ -63,7 +63,7 @@ def test_mesh_base(variant, tmp_path):
 
 
 @pytest.mark.parametrize("props,match", [
-    ({"base": "cube"}, "unknown base 'cube'"),
+    ({"base": "cube"}, "parameter 'base' must be one of .*, got 'cube'"),
     ({"base": "sphere", "resolution": 0}, "resolution"),
     ({"base": "sphere", "resolution": -4}, "resolution"),
     ({"base": "sphere", "radius": -1.0}, "radius"),

@@ -198,7 +198,7 @@ def test_tf_low_outside_the_normalised_range_is_refused(variant, tf_low):
     empty voxel and all space outside the object's box would get density (2.9 / unit at
     tf_low -0.1, tf_high 0.6, density_scale 20); from 1 on, no voxel has any.  Refused at
     load, naming tf_low."""
-    with pytest.raises(RuntimeError, match=r"tf_low: must lie in \[0, 1\).*got " + str(tf_low)):
+    with pytest.raises(RuntimeError, match=r"parameter 'tf_low' must lie in \[0, 1\), got " + str(tf_low)):
         mi.load_dict({"type": "displaced_volume", "procedural": "piggy_bank", "resolution": 16,
                       "tf_low": tf_low, "tf_high": 1.5})
     empty = mi.load_dict({"type": "displaced_volume", "procedural": "piggy_bank", "resolution": 16,
