@@ -6,7 +6,9 @@ reference geometry, all in one process, at ``res`` x ``res`` pixels:
 * ``load_s``: :func:`mi_displace.render.scene.load` (XML, plugin builds: tables, maps,
   slices, tessellation; ``fit_to_sensors``; acceleration structure), wall seconds;
 * ``first_frame_s``: the first frame after the load (tracing + kernel compilation, or a
-  kernel-cache hit when an earlier run compiled the same kernels);
+  kernel-cache hit when an earlier run compiled the same kernels); ``still_frame_s``: median
+  of ``orbit`` more frames of the same view with nothing changed (what the other benchmarks
+  call a warm render);
 * ``orbit_frame_s``: median wall seconds of a frame after a camera move, over ``orbit``
   positions: the sensor's ``to_world`` edited through ``mi.traverse`` (a rotation of
   ±:data:`ORBIT_DEG` degrees about the camera's up axis through the scene's bounding-box
@@ -17,11 +19,14 @@ reference geometry, all in one process, at ``res`` x ``res`` pixels:
   :data:`EDIT_SPAN`]), over ``edits`` values; ``edit_first_s``: the first of them;
 * ``fps`` = 1 / ``orbit_frame_s``, beside ``paper_fps`` (the paper's own frame rate on its
   GPU, ``paper`` says where; null when the paper gives none) and ``fps_vs_paper``;
-* ``kernel_share``: of one extra orbit frame timed under ``dr.JitFlag.KernelHistory``, the
+* ``kernel_share``: of one extra orbit frame (``profiled_frame_s``, from a view between the
+  first two positions, which no frame had yet) timed under ``dr.JitFlag.KernelHistory``, the
   share of its wall time spent in Dr.Jit's kernels and memory operations (the sum of
   ``execution_time`` of every ``dr.kernel_history()`` entry); the rest (``1 - share``) is
-  Python, tracing, code generation and launches; ``kernels`` (launches in that frame),
-  ``codegen_ms`` (Dr.Jit's IR generation inside it);
+  Python, tracing, compilation and launches; ``kernels`` (launches in that frame),
+  ``cache_misses`` (of them, kernels compiled anew: a view-dependent value traced as a
+  constant), ``codegen_ms`` (Dr.Jit's IR generation), ``compile_ms`` (LLVM / PTX compilation
+  of the misses);
 * ``peak_rss_mb``: the process's peak resident memory after the row
   (``resource.getrusage``), ``jit_peak_mb``: the peak of Dr.Jit's allocator for the variant's
   backend (``drjit.detail.malloc_watermark``); both only grow, so a row's own peak shows as a
@@ -146,10 +151,9 @@ def _timed(step) -> float:
     return time.perf_counter() - start
 
 
-def _orbit(scene, count: int) -> list:
-    """``count`` sensor ``to_world`` transforms: the loaded one rotated by angles evenly spread
-    over [-ORBIT_DEG, ORBIT_DEG] degrees about the camera's up axis through the centre of the
-    scene's bounding box (the world origin when the scene has no shape: a volume drawn by its
+def _orbit(scene, angles) -> list:
+    """Sensor ``to_world`` transforms: the loaded one rotated by each of ``angles`` (degrees)
+    about the camera's up axis through the centre of the scene's bounding box (the world origin when the scene has no shape: a volume drawn by its
     integrator)."""
     to_world = mi.ScalarTransform4f(np.array(scene.sensors()[0].world_transform().matrix).reshape(4, 4))
     up = to_world @ mi.ScalarVector3f(0, 1, 0)
@@ -157,7 +161,7 @@ def _orbit(scene, count: int) -> list:
     centre = mi.ScalarVector3f(box.center() if box.valid() else 0.0)
     return [mi.ScalarTransform4f().translate(centre) @ mi.ScalarTransform4f().rotate(up, float(angle))
             @ mi.ScalarTransform4f().translate(-centre) @ to_world
-            for angle in np.linspace(-ORBIT_DEG, ORBIT_DEG, count)]
+            for angle in angles]
 
 
 def _edit_key(params, key: str) -> str:
@@ -182,16 +186,20 @@ def _series(step, values) -> list:
 
 def _profile(step) -> dict:
     """One call of ``step`` under ``dr.JitFlag.KernelHistory``: wall seconds, the share spent
-    in Dr.Jit's kernels and memory operations, the number of kernel launches and Dr.Jit's
-    code-generation milliseconds."""
+    in Dr.Jit's kernels and memory operations, the number of kernel launches, how many of them
+    missed Dr.Jit's in-memory kernel cache, Dr.Jit's code-generation and the backend's
+    compilation milliseconds."""
     dr.kernel_history()   # drop what earlier work left
     with dr.scoped_set_flag(dr.JitFlag.KernelHistory):
         wall = _timed(step)
     history = dr.kernel_history()
+    kernels = [h for h in history if h["type"] == dr.KernelType.JIT]
     return {"profiled_frame_s": wall,
             "kernel_share": sum(h["execution_time"] for h in history) / 1e3 / wall,
-            "kernels": sum(1 for h in history if h["type"] == dr.KernelType.JIT),
-            "codegen_ms": sum(h.get("codegen_time", 0.0) for h in history)}
+            "kernels": len(kernels),
+            "cache_misses": sum(1 for h in kernels if not h["cache_hit"]),
+            "codegen_ms": sum(h["codegen_time"] for h in kernels),
+            "compile_ms": sum(h["backend_time"] for h in kernels)}
 
 
 def measure(row: Row, sizes: Sizes) -> dict:
@@ -214,6 +222,7 @@ def measure(row: Row, sizes: Sizes) -> dict:
             raise FloatingPointError(f"bench frames: row {row.name!r} rendered NaN or Inf")
 
     first = _timed(frame)
+    still = _series(lambda _: frame(), range(sizes.orbit))
     sensor = mi.traverse(scene.sensors()[0])
 
     def move(to_world):
@@ -222,10 +231,11 @@ def measure(row: Row, sizes: Sizes) -> dict:
         fit_to_sensors(scene)
         frame()
 
-    poses = _orbit(scene, sizes.orbit)
-    orbit = _series(move, poses)
+    angles = np.linspace(-ORBIT_DEG, ORBIT_DEG, sizes.orbit)
+    orbit = _series(move, _orbit(scene, angles))
     check()
-    profile = _profile(lambda: move(poses[-1]))
+    unseen = _orbit(scene, [(angles[0] + angles[1]) / 2])[0]   # a view no frame had yet
+    profile = _profile(lambda: move(unseen))
 
     edits = mi.traverse(scene)
     key = _edit_key(edits, row.edit_key)
@@ -245,6 +255,7 @@ def measure(row: Row, sizes: Sizes) -> dict:
         "params": {k: str(v) for k, v in params.items()},
         "integrator": str(integrator).split("[")[0],
         "load_s": timings["build_s"], "first_frame_s": first,
+        "still_frame_s": statistics.median(still),
         "orbit_first_s": orbit[0], "orbit_frame_s": orbit_s,
         "edit_key": key.split(".", 1)[1] if key.startswith("object_") else key,
         "edit_first_s": edit_times[0], "edit_frame_s": statistics.median(edit_times),
@@ -264,7 +275,12 @@ def run(sizes: Sizes = FULL) -> dict:
     """Every row of :data:`ROWS` at ``sizes``, in one process."""
     import os
 
-    rows = [measure(row, sizes) for row in ROWS]
+    from mi_displace.core.progress import stage
+
+    rows = []
+    for row in ROWS:   # a progress line per row (the mi_displace logger)
+        with stage(f"bench frames: {row.name} at {sizes.res}^2"):
+            rows.append(measure(row, sizes))
     return {"variant": mi.variant(), "resolution": sizes.res, "orbit_positions": sizes.orbit,
             "edits": sizes.edits, "orbit_deg": ORBIT_DEG, "edit_span": EDIT_SPAN,
             "rows": rows, "cpu_count": os.cpu_count(), "load_average": os.getloadavg()[0]}
@@ -275,15 +291,18 @@ def markdown(record: dict) -> str:
     def cell(value, fmt):
         return "–" if value is None else format(value, fmt)
 
-    lines = ["| row | load s | first frame s | orbit frame ms | edit frame ms | fps | paper fps "
-             "| × paper | kernels % | launches | peak RSS MB | Dr.Jit peak MB |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = ["| row | load s | first frame s | still frame ms | orbit frame ms | edit frame ms | fps "
+             "| paper fps | × paper | kernels % | launches (compiled) | compile ms | peak RSS MB "
+             "| Dr.Jit peak MB |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in record["rows"]:
         paper = "–" if r["paper_fps"] is None else "–".join(f"{f:g}" for f in dict.fromkeys(r["paper_fps"]))
         lines.append(
-            f"| {r['name']} | {r['load_s']:.2f} | {r['first_frame_s']:.2f} | {1e3 * r['orbit_frame_s']:.0f} "
-            f"| {1e3 * r['edit_frame_s']:.0f} | {r['fps']:.1f} | {paper} | {cell(r['fps_vs_paper'], '.2f')} "
-            f"| {100 * r['kernel_share']:.0f} | {r['kernels']} | {r['peak_rss_mb']:.0f} | {r['jit_peak_mb']:.0f} |")
+            f"| {r['name']} | {r['load_s']:.2f} | {r['first_frame_s']:.2f} | {1e3 * r['still_frame_s']:.0f} "
+            f"| {1e3 * r['orbit_frame_s']:.0f} | {1e3 * r['edit_frame_s']:.0f} | {r['fps']:.1f} | {paper} "
+            f"| {cell(r['fps_vs_paper'], '.2f')} | {100 * r['kernel_share']:.0f} "
+            f"| {r['kernels']} ({r['cache_misses']}) | {r['compile_ms']:.0f} | {r['peak_rss_mb']:.0f} "
+            f"| {r['jit_peak_mb']:.0f} |")
     return "\n".join(lines)
 
 
