@@ -12,10 +12,10 @@ reference geometry, all in one process, at ``res`` x ``res`` pixels:
 * ``orbit_frame_s``: median wall seconds of a frame after a camera move, over ``orbit``
   positions: the sensor's ``to_world`` edited through ``mi.traverse`` (a rotation of
   ±:data:`ORBIT_DEG` degrees about the camera's up axis through the scene's bounding-box
-  centre), :func:`mi_displace.fit_to_sensors`, render; ``orbit_first_s``: the first of them
-  (the first frame from a new view: view-dependent builds);
+  centre, at angles new to each run: :func:`_spread`), :func:`mi_displace.fit_to_sensors`,
+  render; ``orbit_first_s``: the first of them (the first frame from a new view);
 * ``edit_frame_s``: median wall seconds of a frame after a ``mi.traverse`` edit of the row's
-  main parameter (``edit_key``, scaled by factors in [1 - :data:`EDIT_SPAN`, 1 +
+  main parameter (``edit_key``, scaled by factors spread over [1 - :data:`EDIT_SPAN`, 1 +
   :data:`EDIT_SPAN`]), over ``edits`` values; ``edit_first_s``: the first of them;
 * ``fps`` = 1 / ``orbit_frame_s``, beside ``paper_fps`` (the paper's own frame rate on its
   GPU, ``paper`` says where; null when the paper gives none) and ``fps_vs_paper``;
@@ -164,6 +164,14 @@ def _orbit(scene, angles) -> list:
             for angle in angles]
 
 
+def _spread(low: float, high: float, count: int, rng) -> np.ndarray:
+    """``count`` increasing values in [low, high]: one in each of ``count`` equal strata, all at
+    the same random place in theirs.  Random on purpose: a value traced into a kernel as a
+    constant makes a new kernel, and a value an earlier run used would find that kernel in
+    Dr.Jit's on-disk cache, which a user moving a camera or a slider does not."""
+    return low + (np.arange(count) + rng.uniform()) * (high - low) / count
+
+
 def _edit_key(params, key: str) -> str:
     """The one ``mi.traverse`` key equal to ``key`` or ending in ``"." + key`` (shapes and
     emitters without an id get an address as their prefix)."""
@@ -207,6 +215,7 @@ def measure(row: Row, sizes: Sizes) -> dict:
     from mi_displace.render.scene import load
 
     params = {**row.params, **(row.quick_params if sizes.quick else {}), "res": sizes.res}
+    rng = np.random.default_rng()   # unseeded on purpose: see _spread
     gc.collect()
     scene, timings = load(scene_path(row.scene), **params)
     integrator = mi.load_dict({"type": "raster", "aa": 1}) if row.integrator == "raster" else scene.integrator()
@@ -231,7 +240,7 @@ def measure(row: Row, sizes: Sizes) -> dict:
         fit_to_sensors(scene)
         frame()
 
-    angles = np.linspace(-ORBIT_DEG, ORBIT_DEG, sizes.orbit)
+    angles = _spread(-ORBIT_DEG, ORBIT_DEG, sizes.orbit, rng)
     orbit = _series(move, _orbit(scene, angles))
     check()
     unseen = _orbit(scene, [(angles[0] + angles[1]) / 2])[0]   # a view no frame had yet
@@ -246,7 +255,7 @@ def measure(row: Row, sizes: Sizes) -> dict:
         edits.update()
         frame()
 
-    edit_times = _series(edit, np.linspace(1 - EDIT_SPAN, 1 + EDIT_SPAN, sizes.edits))
+    edit_times = _series(edit, _spread(1 - EDIT_SPAN, 1 + EDIT_SPAN, sizes.edits, rng))
     check()
     orbit_s = statistics.median(orbit)
     paper = max(row.paper.fps) if row.paper.fps else None

@@ -59,3 +59,14 @@ def test_kernel_share_counts_launches_and_their_time(variant_llvm):
     again = _profile(lambda: dr.eval(dr.sum(dr.sin(dr.arange(mi.Float, 2_000_000) * seed))))
     assert again["kernels"] == busy["kernels"] and again["cache_misses"] == again["compile_ms"] == 0
     assert 0.0 < busy["kernel_share"] <= 1.0 + 1e-6
+
+
+def test_spread_puts_one_value_in_each_stratum_new_each_run():
+    from mi_displace.bench.frames import _spread
+
+    low, high, count = -20.0, 20.0, 10
+    first, second = (_spread(low, high, count, np.random.default_rng(seed)) for seed in (1, 2))
+    for values in (first, second):
+        strata = np.floor((values - low) / (high - low) * count)
+        np.testing.assert_array_equal(strata, np.arange(count))   # one per stratum, in order
+    assert not np.intersect1d(first, second).size                 # another run, other values
