@@ -26,7 +26,7 @@ reference geometry, all in one process, at ``res`` x ``res`` pixels:
   Python, tracing, compilation and launches; ``kernels`` (launches in that frame),
   ``cache_misses`` (of them, kernels compiled anew: a view-dependent value traced as a
   constant), ``codegen_ms`` (Dr.Jit's IR generation), ``compile_ms`` (LLVM / PTX compilation
-  of the misses);
+  of the misses); ``edit_profile``: the same of one more edit frame, at a value no frame had;
 * ``peak_rss_mb``: the process's peak resident memory after the row
   (``resource.getrusage``), ``jit_peak_mb``: the peak of Dr.Jit's allocator for the variant's
   backend (``drjit.detail.malloc_watermark``); both only grow, so a row's own peak shows as a
@@ -255,8 +255,10 @@ def measure(row: Row, sizes: Sizes) -> dict:
         edits.update()
         frame()
 
-    edit_times = _series(edit, _spread(1 - EDIT_SPAN, 1 + EDIT_SPAN, sizes.edits, rng))
+    factors = _spread(1 - EDIT_SPAN, 1 + EDIT_SPAN, sizes.edits, rng)
+    edit_times = _series(edit, factors)
     check()
+    edit_profile = _profile(lambda: edit((factors[0] + factors[1]) / 2))   # a value new to this run
     orbit_s = statistics.median(orbit)
     paper = max(row.paper.fps) if row.paper.fps else None
     record = {
@@ -272,6 +274,7 @@ def measure(row: Row, sizes: Sizes) -> dict:
         "paper_fps": list(row.paper.fps) if row.paper.fps else None, "paper": row.paper.source,
         "fps_vs_paper": (1.0 / orbit_s) / paper if paper else None,
         **profile,
+        "edit_profile": edit_profile,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "jit_peak_mb": dr.detail.malloc_watermark(dr.backend_v(mi.Float)) / 2**20,
     }
@@ -301,7 +304,7 @@ def markdown(record: dict) -> str:
         return "–" if value is None else format(value, fmt)
 
     lines = ["| row | load s | first frame s | still frame ms | orbit frame ms | edit frame ms | fps "
-             "| paper fps | × paper | kernels % | launches (compiled) | compile ms | peak RSS MB "
+             "| paper fps | × paper | kernels % | launches (compiled) | compile ms orbit / edit | peak RSS MB "
              "| Dr.Jit peak MB |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in record["rows"]:
@@ -310,7 +313,8 @@ def markdown(record: dict) -> str:
             f"| {r['name']} | {r['load_s']:.2f} | {r['first_frame_s']:.2f} | {1e3 * r['still_frame_s']:.0f} "
             f"| {1e3 * r['orbit_frame_s']:.0f} | {1e3 * r['edit_frame_s']:.0f} | {r['fps']:.1f} | {paper} "
             f"| {cell(r['fps_vs_paper'], '.2f')} | {100 * r['kernel_share']:.0f} "
-            f"| {r['kernels']} ({r['cache_misses']}) | {r['compile_ms']:.0f} | {r['peak_rss_mb']:.0f} "
+            f"| {r['kernels']} ({r['cache_misses']}) | {r['compile_ms']:.0f} / {r['edit_profile']['compile_ms']:.0f} "
+            f"| {r['peak_rss_mb']:.0f} "
             f"| {r['jit_peak_mb']:.0f} |")
     return "\n".join(lines)
 
