@@ -72,7 +72,9 @@ class Paper(NamedTuple):
 class Row(NamedTuple):
     """One measured configuration: ``name``; the packaged ``scene`` file loaded with
     ``params`` (XML ``$name`` values, besides ``res``) and ``quick_params`` on top with
-    ``--quick``; ``edit_key``: the ``mi.traverse`` key of its main parameter (a float);
+    ``--quick``; ``edit_key``: the ``mi.traverse`` key (or its ending, :func:`_edit_key`) of
+    its main parameter, or where that is not exposed of a colour (a number or a colour, scaled
+    by the edit factors);
     ``integrator``: ``"raster"`` (rendered by ``raster`` with ``aa=1``) or ``"scene"`` (the
     scene's own); ``paper``: the paper's frame rate."""
     name: str
@@ -86,7 +88,7 @@ class Row(NamedTuple):
 
 _NO_RATE = Paper(None, "no frame rate in the papers of this project")
 _VDM = Paper((112.0, 112.0), "VDM Fig. 9: torus, 4800 triangles, ATI Radeon 9700 Pro")
-_SLICING = Paper((35.0, 40.0), "slicing §4.4: donut, 625 polygons, 15-25 slices, GeForce 2 GTS")
+_SLICING = Paper((35.0, 40.0), "slicing paper, Fig. 1 and its timings: donut, 625 polygons, 15-25 slices, GeForce 2 GTS")
 #: The edit of the rows whose main parameter (depth) ``mi.traverse`` does not expose: the
 #: material's colour.
 _MATERIAL = "vdm_material.reflectance.value"
@@ -115,7 +117,7 @@ ROWS = (
     _donut("screen"),
     Row("depth_object", "slicing_cup_depth.xml", {"mode": "approximation", "integrator": "raster"},
         {"slices": 32}, "irradiance.value", "raster",
-        Paper((2.7, 2.7), "slicing §5: creature depth object, 400^2 pixels, 150 slices, GeForce 2 GTS")),
+        Paper((2.7, 2.7), "slicing §4, Fig. 12-14: creature depth object, 400^2 pixels, 150 slices, GeForce 2 GTS")),
     Row("hddm_maps", "ddm_thorns_sphere.xml", {"mode": "approximation", "integrator": "raster"},
         {}, "height", "raster",
         Paper((8.1, 8.5), "HDDM Table 1: human face, thorn tile, 430k vertices, GeForce 6600 / 6800")),
