@@ -21,6 +21,7 @@ FIELDS = {
     "ddm": ("map_time_warm_s", "rms_error_rel", "max_error_rel", "maps_bytes", "table1"),
     "dicing": ("adaptive_faces", "uniform_faces", "flip_adaptive", "noise_floor_flip",
                "cycles_sphere_faces", "cycles_sphere_flip_vs_uniform_4x"),
+    "frames": ("rows",),
     "grad": ("forward_s", "backward_s", "grad_rel_error_scale", "grad_rel_error_height",
              "recovery_rms"),
     "grad_bunny": ("seconds_per_iteration", "iteration_ratio", "edit"),
