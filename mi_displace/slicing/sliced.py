@@ -18,7 +18,6 @@ from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
 from mi_displace.core.texture_height import height_function
 from mi_displace.slicing import geometry as geo
