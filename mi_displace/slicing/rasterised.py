@@ -60,7 +60,7 @@ class FrameBuffer:
             undefined where ``found`` is not set), read by one packet gather, (n * 16,)
             Float; :attr:`hit` unpacks it.
         eye: camera position (opaque Point3f, world units; perspective) or None (orthographic).
-        length: the volume's size [world units] that :data:`ON_RAY_EPS` is relative to.
+        length: the volume's size [world units] that :data:`ON_RAY_EPS` is relative to (opaque Float).
     """
 
     view: zbuffer.View
@@ -69,7 +69,7 @@ class FrameBuffer:
     found: mi.Bool
     packed: mi.Float
     eye: mi.Point3f | None
-    length: float
+    length: mi.Float
 
     @property
     def hit(self) -> Hit:
