@@ -45,6 +45,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from functools import cached_property
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
@@ -158,6 +159,16 @@ def gather_geometry(shapes) -> Geometry:
         shapes=mi.ShapePtr(shapes), alpha=mi.Bool(alpha), alpha_any=any(alpha), bbox=bbox)
 
 
+class ViewUniforms(NamedTuple):
+    """A :class:`View`'s values as Dr.Jit scalars (float32, width 1): ``to_local`` (world ->
+    view-local), ``q0``, ``dq`` (Point2f / Vector2f), ``near``, ``far`` (Float, local depth)."""
+    to_local: mi.Transform4f
+    q0: mi.Point2f
+    dq: mi.Vector2f
+    near: mi.Float
+    far: mi.Float
+
+
 @dataclass
 class View:
     """A projection onto a ``width`` x ``height`` sample grid.
@@ -199,6 +210,17 @@ class View:
         transform = mi.Transform4f((a @ self.to_local).astype(np.float32))
         dr.make_opaque(transform)
         return transform
+
+    @cached_property
+    def uniforms(self) -> "ViewUniforms":
+        """The per-view values kernels read (:class:`ViewUniforms`), opaque like
+        :attr:`to_clip`: a new camera placement, whose inverse rounds these differently in
+        the last bits, reuses the compiled kernels instead of tracing them as new literals."""
+        values = ViewUniforms(mi.Transform4f(self.to_local.astype(np.float32)),
+                              mi.Point2f(*self.q0), mi.Vector2f(*self.dq),
+                              mi.Float(self.near), mi.Float(self.far))
+        dr.make_opaque(*values)
+        return values
 
     def homogeneous(self, p: mi.Point3f) -> mi.Vector3f:
         """h(p) of clip points: (x, y, z) in perspective, (x, y, 1) in orthographic views."""
@@ -290,19 +312,20 @@ def _bbox(view: View, c: list, pairs=TRIANGLE):
             lo[i] = dr.select(ok, dr.minimum(lo[i], g), lo[i])
             hi[i] = dr.select(ok, dr.maximum(hi[i], g), hi[i])
 
+    near, far = view.uniforms.near, view.uniforms.far
     if view.perspective:
         for p in c:  # the hull clipped at z = near: front vertices + crossings
-            include(p, p.z >= view.near)
+            include(p, p.z >= near)
         for i, j in pairs:
             p, q = c[i], c[j]
-            crosses = (p.z < view.near) != (q.z < view.near)
-            x = dr.lerp(p, q, (view.near - p.z) / (q.z - p.z))
-            include(mi.Point3f(x.x, x.y, view.near), crosses)
+            crosses = (p.z < near) != (q.z < near)
+            x = dr.lerp(p, q, (near - p.z) / (q.z - p.z))
+            include(mi.Point3f(x.x, x.y, near), crosses)
     else:
         for p in c:
             include(p, mi.Bool(True))
     z_lo, z_hi = _z_range(c)
-    keep = (z_hi >= view.near) & (z_lo <= view.far)
+    keep = (z_hi >= near) & (z_lo <= far)
     size = (view.width, view.height)
     start, count = [], []
     for i in range(2):
@@ -354,7 +377,7 @@ def _row_span(view: View, c: list, Y: mi.UInt32, x0: mi.Int32, x1: mi.Int32, pai
     xs = mi.Int32(dr.clip(dr.ceil(lo - 0.5 - margin), mi.Float(x0), mi.Float(x1)))
     xe = mi.Int32(dr.clip(dr.floor(hi - 0.5 + margin) + 1, mi.Float(x0), mi.Float(x1)))
     if view.perspective:
-        behind = _z_range(c)[0] < view.near
+        behind = _z_range(c)[0] < view.uniforms.near
         xs, xe = dr.select(behind, x0, xs), dr.select(behind, x1, xe)
     ok = dr.isfinite(lo) & dr.isfinite(hi)
     return dr.select(ok, xs, x0), dr.select(ok, dr.maximum(xe, xs), x1)
@@ -393,7 +416,7 @@ def _inside(view: View, e: list, z: tuple, active: mi.Bool):
     inv = dr.rcp(total)
     b1, b2 = e[1] * inv, e[2] * inv
     z = (1.0 - b1 - b2) * z0 + b1 * z1 + b2 * z2
-    inside &= (z >= view.near) & (z <= view.far)
+    inside &= (z >= view.uniforms.near) & (z <= view.uniforms.far)
     return inside, b1, b2, z
 
 
@@ -483,11 +506,15 @@ def _row_pieces(bx0: mi.Int32, by0: mi.Int32, bw: mi.Int32, bh: mi.Int32):
     offsets = dr.prefix_sum(mi.UInt64(counts))  # exclusive
     dr.eval(offsets, bx0, by0, bw, pieces)
     total = int(dr.sum(mi.UInt64(counts))[0])
-    for start in range(0, total, CHUNK):  # work batches, not boxes
-        size = min(CHUNK, total - start)
+    for begin in range(0, total, CHUNK):  # work batches, not boxes
+        size = min(CHUNK, total - begin)
+        # the bounds as kernel parameters (opaque), the counts added by plain atomics (the
+        # default mode keeps a copy per worker at a stride of the traced size): the kernels
+        # do not depend on the batch or on the piece count, which moves with the view
+        start, end = dr.opaque(mi.UInt64, begin), dr.opaque(mi.UInt64, begin + size)
         seg = dr.zeros(mi.UInt32, size)
-        inner = (offsets > start) & (offsets < start + size)
-        dr.scatter_add(seg, 1, mi.UInt32(offsets - start), inner)
+        inner = (offsets > start) & (offsets < end)
+        dr.scatter_add(seg, 1, mi.UInt32(offsets - start), inner, mode=dr.ReduceMode.Direct)
         first = mi.UInt32(dr.count(offsets <= start)) - 1
         k = first + dr.prefix_sum(seg) + seg
         j = mi.UInt32(start + dr.arange(mi.UInt64, size) - dr.gather(mi.UInt64, offsets, k))

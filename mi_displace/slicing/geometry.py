@@ -362,7 +362,8 @@ class SliceScene:
 
     Attributes: scene, mesh; faces (3 x UInt32 per face); uv, ramp, bn, su, sv (per vertex);
     flags (per face: 1 wall, 2 bottom wall); fn (per-face unit geometric normal); length
-    (the bounding-box diagonal [world units], the size the walks' offsets are relative to).
+    (the bounding-box diagonal [world units], the size the walks' offsets are relative to;
+    an opaque Float of width 1).
     """
 
     def __init__(self, sm: SliceMesh, name: str):
@@ -381,7 +382,8 @@ class SliceScene:
         fn = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
         self.fn = f32(fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-30))
         self.triangles = len(sm.faces)
-        self.length = float(np.linalg.norm(sm.positions.max(0) - sm.positions.min(0)))
+        # opaque: a kernel parameter, so a rebuild at a new scale reuses the compiled kernels
+        self.length = dr.opaque(mi.Float, float(np.linalg.norm(sm.positions.max(0) - sm.positions.min(0))))
 
     def geometry(self) -> zbuffer.Geometry:
         """The triangles for the z-buffer (:mod:`mi_displace.slicing.rasterised`), built once."""

@@ -31,7 +31,6 @@ from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
 from mi_displace.render import zbuffer
 from mi_displace.render.raster import pixel_rays
@@ -60,8 +59,8 @@ class FrameBuffer:
         packed: per sample, the fragment: :data:`PACKED` floats (1, p, uv, n, su, sv, 0;
             undefined where ``found`` is not set), read by one packet gather, (n * 16,)
             Float; :attr:`hit` unpacks it.
-        eye: (3,) camera position (perspective) or None (orthographic).
-        length: the volume's size [world units] that :data:`ON_RAY_EPS` is relative to.
+        eye: camera position (opaque Point3f, world units; perspective) or None (orthographic).
+        length: the volume's size [world units] that :data:`ON_RAY_EPS` is relative to (opaque Float).
     """
 
     view: zbuffer.View
@@ -69,8 +68,8 @@ class FrameBuffer:
     covered: mi.Bool
     found: mi.Bool
     packed: mi.Float
-    eye: np.ndarray | None
-    length: float
+    eye: mi.Point3f | None
+    length: mi.Float
 
     @property
     def hit(self) -> Hit:
@@ -88,11 +87,10 @@ class FrameBuffer:
             caller walks the slices itself.
         """
         view = self.view
-        local = mi.Transform4f(view.to_local.astype(np.float32))
+        local, q0, dq = view.uniforms.to_local, view.uniforms.q0, view.uniforms.dq
         dl = local @ d
         if view.perspective:
-            eye = mi.Point3f(*[float(x) for x in self.eye])
-            r = origin - eye
+            r = origin - self.eye
             off = r - dr.dot(r, d) * d
             tol = ON_RAY_EPS * (self.length + dr.norm(r))
             on_ray = (dr.norm(off) <= tol) & (dr.dot(r, d) >= -tol) & (dl.z > 0)
@@ -101,7 +99,7 @@ class FrameBuffer:
             ol = local @ origin
             on_ray = (dr.abs(dl.x) + dr.abs(dl.y) <= ON_RAY_EPS) & (dl.z > 0)
             q = mi.Point2f(ol.x, ol.y)
-        gx, gy = (q.x - view.q0[0]) / view.dq[0], (q.y - view.q0[1]) / view.dq[1]
+        gx, gy = (q.x - q0.x) / dq.x, (q.y - q0.y) / dq.y
         X, Y = dr.floor(gx), dr.floor(gy)
         on_ray &= (dr.abs(gx - X - 0.5) <= ON_SAMPLE_CELLS) & (dr.abs(gy - Y - 0.5) <= ON_SAMPLE_CELLS)
         on_ray &= (X >= 0) & (X < view.width) & (Y >= 0) & (Y < view.height)
@@ -159,7 +157,7 @@ def _store(frame: FrameBuffer, ray, found, keys, clip, geom, attributes) -> None
     X, Y = zbuffer.sample_xy(view, index, aa)
     _, b1, b2, _ = zbuffer.fragment(view, clip, geom, tri, X, Y, True)
     o, d = dr.gather(mi.Point3f, ray.o, index), dr.gather(mi.Vector3f, ray.d, index)
-    local = mi.Transform4f(view.to_local.astype(np.float32))
+    local = view.uniforms.to_local
     depth = dr.reinterpret_array(mi.Float, mi.UInt32(key >> 32))   # view-local z
     p = o + (depth - (local @ o).z) / (local @ d).z * d
     uv, n, su, sv = attributes(tri, b1, b2)
@@ -281,7 +279,8 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
     dr.eval(covered, choice)
     eye = None
     if view.perspective:
-        eye = np.array(sensor.world_transform() @ mi.ScalarPoint3f(0, 0, 0), np.float64).ravel()
+        eye = mi.Point3f(sensor.world_transform() @ mi.ScalarPoint3f(0, 0, 0))
+        dr.make_opaque(eye)   # a kernel parameter: a camera move compiles nothing new
     frame = FrameBuffer(view, aa, covered, dr.zeros(mi.Bool, n), dr.empty(mi.Float, PACKED * n), eye,
                         walls.length)
     # the base polygons, when drawn: the bottom wall where the ray leaves through it; drawn

@@ -99,8 +99,9 @@ class SlicedVolume:
                 sm = geo.orthogonal_slices(bm, scale, axis, geo.orthogonal_levels(bm, axis, self.counts[fam]))
             tris += sm.triangles
             nbytes += sm.nbytes()
+            # the walk's polygon bound, opaque: the b / c counts follow the scale
             self.families[fam] = (geo.SliceScene(geo.concat([sm, walls]), f"slices_{fam}"),
-                                  4 * self.counts[fam] + 64)
+                                  dr.opaque(mi.UInt32, 4 * self.counts[fam] + 64))
         self.walls_scene = geo.SliceScene(walls, "walls")   # also the proxy's face frames
         #: direction a for the rasteriser (mi_displace.slicing.rasterised): the base vertices'
         #: attributes, slice 0's triangles and the step between slices
@@ -114,7 +115,13 @@ class SlicedVolume:
         #: planes are made in object space, so any ``to_world`` moves them with the surface
         self.to_world, self.to_object = geo.transform_pair(bm.to_world)
         if direction == "screen":
-            self.delta = self.scale / slices   # object units
+            self.delta = dr.opaque(mi.Float, self.scale / slices)   # object units
+        #: the sizes the kernels read, opaque (kernel parameters, not traced constants): a
+        #: rebuild at a new ``scale`` reuses the compiled kernels.  ``scale`` [object units];
+        #: the self-shadow rays' offsets along the normal and the light [world units]
+        self.kernel_scale = dr.opaque(mi.Float, self.scale)
+        self.shadow_offsets = (dr.opaque(mi.Float, SHADOW_BIAS * self.spacing()),
+                               dr.opaque(mi.Float, SHADOW_LEAVE * self.spacing()))
         self.stats = {"slices": slices, "direction": direction, "alpha": alpha,
                       "slices_b": cb, "slices_c": cc, "ratio_scaling": bool(ratio_scaling),
                       "opaque_base": self.opaque_base,
@@ -209,7 +216,7 @@ class SlicedVolume:
 
         def coords(p):   # p: object space
             u, v, dist, inside = geo.base_coordinates(base, p)
-            return mi.Point2f(u, v), dist / self.scale, inside
+            return mi.Point2f(u, v), dist / self.kernel_scale, inside
 
         def test(p):
             uv, h, inside = coords(p)
@@ -236,7 +243,7 @@ class SlicedVolume:
         extrudes."""
         _, grad = self._grad(hit.uv)
         e = self.to_world @ dr.normalize(mi.Vector3f(self.to_object @ mi.Normal3f(hit.n)))
-        m = dr.cross(hit.su + self.scale * grad.x * e, hit.sv + self.scale * grad.y * e)
+        m = dr.cross(hit.su + self.kernel_scale * grad.x * e, hit.sv + self.kernel_scale * grad.y * e)
         m = dr.select(dr.dot(m, hit.n) < 0, -m, m)
         return dr.select(dr.squared_norm(m) > 0, dr.normalize(m), hit.n)
 
@@ -252,6 +259,7 @@ class SlicedVolume:
         :data:`SHADOW_LEAVE` spacings along ``wl`` as well: an orthogonal slice contains
         the normal at a bevel, and a ray starting inside its plane meets it or not by
         float rounding (to_world's translation alone flipped 1.7 % of such pixels)."""
-        origin = hit.p + normal * (SHADOW_BIAS * self.spacing()) + wl * (SHADOW_LEAVE * self.spacing())
+        bias, leave = self.shadow_offsets
+        origin = hit.p + normal * bias + wl * leave
         choice = self.choose(wl, hit.n, hit.su, hit.sv)
         return self.find(origin, wl, choice, active).found

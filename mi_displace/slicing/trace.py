@@ -32,7 +32,7 @@ ALPHA_TESTS = ("basic", "ramp")
 SPAWN_EPS = 1e-5
 
 
-def step_past(p: mi.Point3f, n: mi.Vector3f, d: mi.Vector3f, length: float) -> mi.Float:
+def step_past(p: mi.Point3f, n: mi.Vector3f, d: mi.Vector3f, length: float | mi.Float) -> mi.Float:
     """Distance along unit ``d`` that leaves the polygon through ``p`` (unit normal ``n``)
     behind by :data:`SPAWN_EPS` x (``length`` + max |p|) along its normal (``length``: the
     slices' size, world units).  Walks stay on the ray's line (a normal offset per slice
@@ -50,7 +50,7 @@ def alpha_test(kind: str, D: mi.Float, h_alpha: mi.Float) -> mi.Bool:
 
 def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
                         test: Callable[[mi.Point2f, mi.Float], mi.Bool],
-                        active: mi.Bool, max_iter: int, opaque_base: bool = False):
+                        active: mi.Bool, max_iter: int | mi.UInt32, opaque_base: bool = False):
     """Walk the slice polygons of ``slices`` (a :class:`mi_displace.slicing.geometry.SliceScene`)
     from ``origin`` along unit ``d``.
 
@@ -114,7 +114,7 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
     return found, t_hit, prim, (b0, b1), t_enter, t_exit, bottom
 
 
-def first_passing_plane(o: mi.Point3f, d: mi.Vector3f, m: mi.Vector3f, c, delta: float,
+def first_passing_plane(o: mi.Point3f, d: mi.Vector3f, m: mi.Vector3f, c, delta: float | mi.Float,
                         t_in: mi.Float, t_out: mi.Float, test: Callable[[mi.Point3f], mi.Bool],
                         active: mi.Bool, max_iter: int, skip=None):
     """First of the planes ``p . m = c + k delta`` (k integer) met by ``o + t d`` in

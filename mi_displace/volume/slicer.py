@@ -146,8 +146,18 @@ def occupancy(vol: DisplacedVolume, s: SliceSettings, lo, hi):
     return result
 
 
-def _box_intersect(lo, hi, ray: mi.Ray3f):
-    box = mi.BoundingBox3f(mi.ScalarPoint3f(lo), mi.ScalarPoint3f(hi))
+def _opaque(value, kind=mi.Point3f):
+    """``value`` (a number or (3,) array) as a Dr.Jit value of width 1 that kernels read as a
+    parameter: a new view or a new proxy box (an edit of a map's amount) reuses the compiled
+    kernels instead of tracing its numbers as constants."""
+    out = kind(*np.ravel(value).tolist())
+    dr.make_opaque(out)
+    return out
+
+
+def _box_intersect(lo: mi.Point3f, hi: mi.Point3f, ray: mi.Ray3f):
+    """Ray parameters [t0, t1] (t0 >= 0) inside the box [lo, hi] (Point3f, world units)."""
+    box = mi.BoundingBox3f(lo, hi)
     hit, t0, t1 = box.ray_intersect(ray)
     return hit & (t1 > 0), dr.maximum(t0, 0.0), t1
 
@@ -186,7 +196,7 @@ def light_grid(vol: DisplacedVolume, s: SliceSettings, lights, lo, hi, film_size
         it.p = p
         ds, _ = e.sample_direction(it, mi.Point2f(0.5))
         ray = mi.Ray3f(p, ds.d)
-        _, _, t_exit = _box_intersect(lo, hi, ray)
+        _, _, t_exit = _box_intersect(_opaque(lo), _opaque(hi), ray)
         # a directional light's ds.dist depends on the scene's shapes (none under the slicer)
         directional = mi.has_flag(e.flags(), mi.EmitterFlags.DeltaDirection)
         t_end = t_exit if directional else dr.minimum(t_exit, ds.dist)
@@ -239,25 +249,28 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
     film = max(sensor.film().crop_size())
     gn, grid = light_grid(vol, s, lights, lo, hi, film) if (s.model == "scatter" or s.shadows) else (0, None)
     ray, weight, w, h = pixel_rays(sensor, s.aa)
-    hit, t0, t1 = _box_intersect(lo, hi, ray)
-    fwd = mi.ScalarVector3f(forward)
+    # the view's and the proxy box's numbers are kernel parameters (_opaque)
+    box_lo, box_hi = _opaque(lo), _opaque(hi)
+    hit, t0, t1 = _box_intersect(box_lo, box_hi, ray)
+    fwd = _opaque(forward, mi.Vector3f)
+    zmin = _opaque(zmin, mi.Float)
     cos_f = dr.maximum(dr.dot(ray.d, fwd), 1e-6)
-    z_ray = dr.dot(ray.o - mi.ScalarPoint3f(origin), fwd)
+    z_ray = dr.dot(ray.o - _opaque(origin), fwd)
     # slice k sits at depth zmin + (k + 1/2) spacing; this ray's slices lie in [t0, t1]
     k0 = dr.maximum(dr.ceil((z_ray + t0 * cos_f - zmin) / spacing - 0.5), 0.0)
-    k1 = dr.minimum(dr.floor((z_ray + t1 * cos_f - zmin) / spacing - 0.5), count - 1.0)
+    k1 = dr.minimum(dr.floor((z_ray + t1 * cos_f - zmin) / spacing - 0.5), _opaque(count - 1.0, mi.Float))
     dt = spacing / cos_f
-    box_lo, box_hi = mi.ScalarPoint3f(lo), mi.ScalarPoint3f(hi)
     rho = mi.Color3f(s.color)
     amb = mi.Color3f(0.0)
     for e in ambient:
         si = dr.zeros(mi.SurfaceInteraction3f)
         amb += mi.Color3f(e.eval(si))
     cells, occ = occupancy(vol, s, lo, hi)
-    cx, cy = int(cells[0]), int(cells[1])  # Python ints: NumPy scalars would evaluate symbolic values
-    cell_size = mi.ScalarVector3f((hi - lo) / cells)
+    cx, cy = (_opaque(int(c), mi.Int32) for c in cells[:2])
+    last_cell = _opaque(np.asarray(cells, int) - 1, mi.Vector3i)
+    cell_size = _opaque((hi - lo) / cells, mi.Vector3f)
     inv_d = dr.rcp(ray.d)
-    bias = 2.0 * (float((hi - lo).max()) / max(gn - 1, 1)) if gn else 0.0
+    bias = _opaque(2.0 * (float((hi - lo).max()) / max(gn - 1, 1)) if gn else 0.0, mi.Float)
 
     # the density step's D_k lookup (pre-image, read points, α factors) goes on to the
     # shading of the same sample, which then reads no D_k again (only J and ∇α for the normal)
@@ -316,7 +329,7 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
         x = ray((zmin + (k + 0.5) * spacing - z_ray) / cos_f)
         # empty-space skipping: in an empty cell, jump to the first slice past the exit of
         # the empty cube around it
-        c = dr.clip(mi.Vector3i(dr.floor((x - box_lo) / cell_size)), 0, mi.ScalarVector3i([int(v) - 1 for v in cells]))
+        c = dr.clip(mi.Vector3i(dr.floor((x - box_lo) / cell_size)), 0, last_cell)
         dist = dr.gather(mi.Float, occ, mi.UInt32(c.x + cx * (c.y + cy * c.z)))
         full = dist == 0
         # the cube of cells within dist - 1 of c is empty: its exit face along the ray

@@ -290,3 +290,38 @@ def test_one_slice_walk_for_the_shading(variant, helpers, monkeypatch):
     sensor = helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=32)
     helpers.render({**donut("a"), "bsdf": helpers.MATERIAL}, sensor)
     assert counts["shade_hit"] == 1 and counts["walks"] == 1, counts
+
+
+@pytest.mark.parametrize("direction", ["a", "best"])
+def test_a_camera_move_compiles_no_new_kernel(variant, direction):
+    """The view enters the slicing frame's kernels as parameters, not as traced constants:
+    after two views, the first one turned by a hair more (the same fragments, other numbers
+    in its transforms) launches only kernels Dr.Jit has compiled."""
+    from mi_displace.bench import frames
+    from mi_displace.core.resources import scene_path
+    from mi_displace.render.scene import load
+
+    scene, _ = load(scene_path("slicing_donut.xml"), mode="approximation", integrator="raster",
+                    direction=direction, coarse=16, res=32)
+    integrator = mi.load_dict({"type": "raster", "aa": 1})
+    sensor = mi.traverse(scene.sensors()[0])
+    # degrees; the hair is new to each run: a view traced as constants would otherwise find
+    # an earlier run's kernels in Dr.Jit's on-disk cache.  A hair, not a new place: a view
+    # whose buffers differ in size (a batch of one triangle) has kernels of its own
+    angles = np.array([5.0, 5.5, 5.0 + np.random.default_rng().uniform(1e-3, 2e-3)])
+    images = []
+
+    def move(to_world):
+        sensor["to_world"] = to_world
+        sensor.update()
+        images.append(np.array(mi.render(scene, integrator=integrator, spp=1)))
+
+    first, second, turned = frames._orbit(scene, angles)
+    move(first)
+    move(second)
+    profile = frames._profile(lambda: move(turned))
+    # the camera did move: other float32 numbers in its transform
+    assert not np.array_equal(np.array(first.matrix, np.float32), np.array(turned.matrix, np.float32))
+    assert all(np.isfinite(img).all() for img in images)
+    assert profile["kernels"] > 10
+    assert profile["cache_misses"] == 0, profile
