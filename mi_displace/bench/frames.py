@@ -212,6 +212,30 @@ def _profile(step) -> dict:
             "compile_ms": sum(h["backend_time"] for h in kernels)}
 
 
+def camera_move_profile(scene, angles, render) -> tuple[dict, bool, list]:
+    """Render ``scene`` (``render()`` returns a NumPy image) from the first two of the
+    :func:`_orbit` views at ``angles`` [degrees], then the third under :func:`_profile`.
+
+    Returns:
+        (the third frame's profile, whether the float32 camera matrix differs between the
+        first and the third view, the three images).
+    """
+    sensor = mi.traverse(scene.sensors()[0])
+    images = []
+
+    def move(to_world):
+        sensor["to_world"] = to_world
+        sensor.update()
+        images.append(render())
+
+    first, second, third = _orbit(scene, angles)
+    move(first)
+    move(second)
+    profile = _profile(lambda: move(third))
+    moved = not np.array_equal(np.array(first.matrix, np.float32), np.array(third.matrix, np.float32))
+    return profile, moved, images
+
+
 def measure(row: Row, sizes: Sizes) -> dict:
     """The record of one row (fields in the module doc)."""
     from mi_displace.render.scene import load
