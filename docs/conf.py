@@ -21,12 +21,13 @@ extensions = [
     "sphinx.ext.mathjax",
 ]
 
-# Markdown and notebooks; the tables under figures/ are data the guides link, not pages.
+# Markdown and notebooks; figures/ (data and tables the guides link) and atlas/ (a generated
+# HTML page) are not pages.
 source_suffix = {".md": "myst-nb", ".ipynb": "myst-nb"}
 exclude_patterns = ["figures/**", "atlas/**", "**/.ipynb_checkpoints"]
 root_doc = "index"
 
-# MyST: $...$ maths, ::: fences, anchors for ## and ### headings so that links such as
+# MyST: $...$ maths, ::: fences, anchors for headings down to #### so that links such as
 # `volume.md#conventions` resolve.
 myst_enable_extensions = ["dollarmath", "colon_fence", "deflist"]
 myst_heading_anchors = 4
@@ -48,14 +49,12 @@ napoleon_numpy_docstring = False
 napoleon_use_param = False
 napoleon_use_rtype = False
 
-# -n: every cross reference must resolve.  Types of other packages (Mitsuba, Dr.Jit, NumPy,
-# the standard library) have no inventory here (the build runs offline), so they are exempt.
+# -n: every cross reference must resolve.  Names of other packages (Mitsuba, Dr.Jit, NumPy,
+# the standard-library modules the docstrings name) have no inventory here (the build runs
+# offline, without intersphinx), so they are exempt.
 nitpicky = True
 nitpick_ignore_regex = [
-    (r"py:.*", r"(mi|mitsuba|dr|drjit|np|numpy|trimesh|pathlib|os|logging|types|collections"
-               r"|typing|concurrent|dask|distributed|matplotlib|tqdm|re|importlib)(\..*)?"),
-    (r"py:class", r"(Path|ModuleType|Any|Callable|Iterable|Iterator|Sequence|Mapping|"
-                  r"PathLike|optional|array-like|ndarray)"),
+    (r"py:.*", r"(mi|mitsuba|dr|drjit|np|numpy|pathlib|types|importlib)(\..*)?"),
 ]
 
 html_theme = "furo"
