@@ -192,7 +192,7 @@ class Baker:
         self.low_dev = LowPolyDevice(low, normals, tangents, signs, cage_pos)
         self.cage_mode = cage_pos is not None
 
-    #: channels of the interleaved (H, W, C) result: name -> (first channel, count)
+    #: channels of the interleaved (H, W, C) result, name -> (first channel, count)
     CHANNELS = {"displacement": (0, 1), "normal_tangent": (1, 3), "normal_object": (4, 3),
                 "direction_tangent": (7, 3), "normal_mitsuba": (10, 3), "status": (13, 1),
                 "back_depth": (14, 1)}
@@ -330,7 +330,7 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
         res: map size in texels (int, or (width, height)).
         out_dir: folder for maps, sidecars, ``low.obj`` and ``bake.json`` (``None``: no files).
         aa: sub-samples per texel side (aa x aa regular grid; 1 = texel centre).
-        max_distance: largest |displacement| searched [object units]; default derived from
+        max_distance: largest displacement magnitude searched [object units]; default derived from
             the pair (:func:`default_max_distance`), recorded in ``bake.json``.
         pad: edge padding radius [texels]; texels that missed the high-poly are filled
             from their nearest hit texel within the same radius.

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import mitsuba as mi
 
-#: Marks a parameter without a default: reading fails when it is missing.
+#: Marks a parameter without a default; reading fails when it is missing.
 REQUIRED = type("Required", (), {"__repr__": lambda self: "required"})()
 
 _TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
