@@ -10,8 +10,8 @@ alive: the scene's and a dropped one held only by a cycle; the render traces bot
   package's plugin methods are): it still dies, the collection runs between the methods;
 * ``frame``: the same with the whole render run with the collector paused (as the package's
   ``raster`` frame is): exits 0;
-* ``turn``: the dropped BSDF is registered after the scene's, and the scene's ``eval`` runs
-  ``gc.collect()``, freeing it *before* its turn in the trace: exits 0 (Dr.Jit skips it).
+* ``turn``: as ``bare``, but the dropped BSDF is registered after the scene's: a collection
+  frees it *before* its turn in the trace: exits 0 (Dr.Jit skips it).
 """
 import gc
 import sys
@@ -36,8 +36,6 @@ class Grey(mi.BSDF):
 
     @paused
     def eval(self, ctx, si, wo, active=True):
-        if MODE == "turn":
-            gc.collect()
         return mi.Color3f(0.5 / dr.pi) * dr.maximum(mi.Frame3f.cos_theta(wo), 0)
 
     @paused
@@ -79,8 +77,7 @@ if MODE == "turn":
 render = scene.integrator().render
 if MODE == "frame":
     render = collector_paused(render)
-if MODE != "turn":
-    gc.set_threshold(1, 1, 1)   # collect at (almost) every allocation: a busy trace, made
-gc.enable()                     # deterministic
+gc.set_threshold(1, 1, 1)   # collect at (almost) every allocation: a busy trace, made
+gc.enable()                 # deterministic
 image = render(scene, scene.sensors()[0])   # traces Grey's methods for both instances
 print(f"ok, mean {dr.mean(image.array)[0]:.4f}")
