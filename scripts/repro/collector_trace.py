@@ -11,7 +11,9 @@ alive: the scene's and a dropped one held only by a cycle; the render traces bot
 * ``frame``: the same with the whole render run with the collector paused (as the package's
   ``raster`` frame is): exits 0;
 * ``turn``: as ``bare``, but the dropped BSDF is registered after the scene's: a collection
-  frees it *before* its turn in the trace: exits 0 (Dr.Jit skips it).
+  frees it *before* its turn in the trace: exits 0 (Dr.Jit skips it);
+* ``after``: as ``bare`` at Python's default thresholds, and the scene's BSDF runs
+  ``gc.collect()`` in ``eval``, freeing the dropped one *after* its turn: exits 0.
 """
 import gc
 import sys
@@ -36,6 +38,8 @@ class Grey(mi.BSDF):
 
     @paused
     def eval(self, ctx, si, wo, active=True):
+        if MODE == "after" and not hasattr(self, "cycle"):   # the scene's instance
+            gc.collect()
         return mi.Color3f(0.5 / dr.pi) * dr.maximum(mi.Frame3f.cos_theta(wo), 0)
 
     @paused
@@ -77,7 +81,8 @@ if MODE == "turn":
 render = scene.integrator().render
 if MODE == "frame":
     render = collector_paused(render)
-gc.set_threshold(1, 1, 1)   # collect at (almost) every allocation: a busy trace, made
-gc.enable()                 # deterministic
+if MODE != "after":
+    gc.set_threshold(1, 1, 1)   # collect at (almost) every allocation: a busy trace, made
+gc.enable()                     # deterministic
 image = render(scene, scene.sensors()[0])   # traces Grey's methods for both instances
 print(f"ok, mean {dr.mean(image.array)[0]:.4f}")
