@@ -28,7 +28,10 @@ Compared per texel where both bakers measured the high-poly:
   of the diagonal): mean and mean absolute difference of the maps, and our AO bake's time
   (projection + AO + padding) against Blender's AO bake in the same run;
 * curvature: Blender has no curvature bake; its Geometry > Pointiness baked as emission
-  against our mean curvature H: Pearson correlation over the texels both measured.
+  against our mean curvature H: Pearson correlation over the texels both measured;
+* albedo (:func:`compare_albedo`): Spot itself (its own UVs) under a procedural sRGB texture
+  over a 1,000-face low-poly, our ``albedo`` map against Cycles' DIFFUSE colour bake, and
+  both times.
 
 Writes ``bake_blender.json`` under ``--out`` (default outside the checkout).  ``--quick``:
 Spot subdivided once alone, 128^2 texels, a 1,000-face low-poly.
@@ -169,6 +172,55 @@ def compare_pair(high, res: int, out: Path, target_faces: int) -> dict:
     }
 
 
+def albedo_texture(path: Path, size: int = 512) -> Path:
+    """An 8-bit sRGB PNG of ``size``^2: a 16 x 16 checker of orange and blue, its red
+    channel ramping with u (smooth and sharp colour changes both)."""
+    import mitsuba as mi
+
+    u = (np.arange(size) + 0.5) / size
+    cell = (np.arange(size) * 16 // size)
+    odd = (cell[:, None] + cell[None, :]) % 2 == 1
+    rgb = np.where(odd[..., None], [0.8, 0.3, 0.1], [0.1, 0.4, 0.8]).astype(np.float32)
+    rgb[..., 0] *= 0.3 + 0.7 * u[None, :]
+    srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * rgb ** (1 / 2.4) - 0.055)
+    bitmap = mi.Bitmap(np.round(srgb * 255).astype(np.uint8), pixel_format=mi.Bitmap.PixelFormat.RGB)
+    bitmap.set_srgb_gamma(True)
+    bitmap.write(str(path))
+    return path
+
+
+def compare_albedo(res: int, out: Path) -> dict:
+    """Albedo transfer from textured Spot (see the module docstring)."""
+    from mi_displace.bake.baker import bake
+    from mi_displace.bake.meshdata import load_mesh, save_obj
+    from mi_displace.bake.trace import AMBIGUOUS, OK
+    from mi_displace.bench.peers import blender, measure
+
+    out.mkdir(parents=True, exist_ok=True)
+    spot = load_mesh(SPOT, "spot")
+    save_obj(out / "high.obj", spot.positions, spot.faces, spot.uvs)
+    texture = albedo_texture(out / "texture.png")
+    first = bake(out / "high.obj", None, res=res, out_dir=out / "ours", target_faces=1000,
+                 map_formats=["d16"])
+    dist = first.record["settings"]["max_distance"]
+    r = bake(out / "high.obj", out / "ours" / "low.obj", res=res, max_distance=dist,
+             map_formats=["albedo"], high_texture=texture)
+    record = {"res": res, "high_faces": int(len(spot.faces)), "low_faces": first.record["low"]["faces"],
+              "ours_albedo_bake_s": r.record["timings"]["bake_s"]}
+    cycles, reason = measure(blender.bake, out / "high.obj", out / "ours" / "low.obj", res, dist,
+                             out, texture=texture)
+    if cycles is None:
+        return {**record, "blender_reason": reason}
+    b = cycles["maps"]["albedo"][..., :3]
+    both = ((r.status == OK) | (r.status == AMBIGUOUS)) & np.any(b != 0, axis=-1)
+    diff = np.abs(r.maps["albedo"][both] - b[both]).max(-1)
+    return {**record, "texels_both": int(both.sum()),
+            "abs_diff_max_channel": {**_stats(diff), "mean": float(diff.mean()),
+                                     "over_0.01": int((diff > 0.01).sum())},
+            "blender_albedo_s": cycles["seconds"]["albedo"],
+            "ratio_ours_over_blender": r.record["timings"]["bake_s"] / cycles["seconds"]["albedo"]}
+
+
 def run(out=None, quick: bool = False) -> dict:
     """Both pairs at 1024^2 (``quick``: Spot subdivided once alone, 128^2, 1,000 low-poly
     faces); the
@@ -177,10 +229,12 @@ def run(out=None, quick: bool = False) -> dict:
 
     out = output_dir("bake_blender", out)
     if quick:
-        record = {"spot_displaced": compare_pair(spot_displaced(1), 128, out / "spot", 1000)}
+        record = {"spot_displaced": compare_pair(spot_displaced(1), 128, out / "spot", 1000),
+                  "spot_albedo": compare_albedo(128, out / "albedo")}
     else:
         record = {"spot_displaced": compare_pair(spot_displaced(), 1024, out / "spot", 3000),
-                  "bunny": compare_pair(load_mesh(BUNNY, "bunny"), 1024, out / "bunny", 5000)}
+                  "bunny": compare_pair(load_mesh(BUNNY, "bunny"), 1024, out / "bunny", 5000),
+                  "spot_albedo": compare_albedo(1024, out / "albedo")}
     (out / "bake_blender.json").write_text(_json.dumps(record, indent=2))
     record["out"] = str(out)
     return record

@@ -4,6 +4,7 @@ Run by a Python that has ``bpy`` (Blender as a module), not by mi_displace's own
 (:func:`mi_displace.bench.peers.blender.bake` starts it)::
 
     python blender_side.py HIGH.obj LOW.obj RES MAX_DISTANCE OUT_DIR [AO_SAMPLES AO_DISTANCE]
+    python blender_side.py HIGH.obj LOW.obj RES MAX_DISTANCE OUT_DIR albedo TEXTURE.png
 
 Imports both OBJs without axis conversion (object coordinates unchanged; the low-poly keeps
 the normals written in its ``vn`` lines as custom normals, the high-poly is smooth-shaded),
@@ -19,6 +20,10 @@ top (v = 1) like our maps:
 * with AO_SAMPLES: ``ao`` (selected to active, AO_SAMPLES render samples, the world's AO
   distance AO_DISTANCE) and ``pointiness`` (the high-poly's Geometry > Pointiness as
   emission, selected to active: Blender's nearest to a curvature bake).
+
+The ``albedo`` form bakes only ``albedo``: the high-poly (with its UVs) under a diffuse
+material whose colour is TEXTURE.png (an sRGB image, linear interpolation), Cycles' DIFFUSE
+bake with the colour pass alone, selected to active.
 
 Cycles clears the texels it does not bake to (0, 0, 0).  ``OUT_DIR/blender.json`` holds the
 seconds of each ``bpy.ops.object.bake`` call and Blender's version.
@@ -37,7 +42,8 @@ def _import(path):
     return bpy.context.selected_objects[0]
 
 
-def main(high_path, low_path, res, max_distance, out_dir, ao_samples=0, ao_distance=1.0):
+def main(high_path, low_path, res, max_distance, out_dir, ao_samples=0, ao_distance=1.0,
+         texture=None):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
@@ -58,7 +64,7 @@ def main(high_path, low_path, res, max_distance, out_dir, ao_samples=0, ao_dista
     bake.margin = 0
     seconds = {}
 
-    def run(name, kind, selected, space="TANGENT", green="POS_Y"):
+    def run(name, kind, selected, space="TANGENT", green="POS_Y", passes=None):
         bpy.ops.object.select_all(action="DESELECT")
         if selected:
             high.select_set(True)
@@ -72,12 +78,28 @@ def main(high_path, low_path, res, max_distance, out_dir, ao_samples=0, ao_dista
         start = time.perf_counter()
         bpy.ops.object.bake(type=kind, use_selected_to_active=selected, normal_space=space,
                             cage_extrusion=max_distance, max_ray_distance=2 * max_distance,
-                            margin=0, normal_g=green)
+                            margin=0, normal_g=green, **({"pass_filter": passes} if passes else {}))
         seconds[name] = time.perf_counter() - start
         px = np.empty(res * res * 4, np.float32)
         image.pixels.foreach_get(px)
         np.save(f"{out_dir}/{name}.npy", px.reshape(res, res, 4)[::-1].copy())
 
+    if texture is not None:
+        colour = bpy.data.materials.new("albedo")
+        colour.use_nodes = True
+        nodes = colour.node_tree.nodes
+        nodes.clear()   # the default Principled BSDF and output would stay the active output
+        lookup, diffuse = nodes.new("ShaderNodeTexImage"), nodes.new("ShaderNodeBsdfDiffuse")
+        output = nodes.new("ShaderNodeOutputMaterial")
+        lookup.image = bpy.data.images.load(texture)
+        colour.node_tree.links.new(lookup.outputs["Color"], diffuse.inputs["Color"])
+        colour.node_tree.links.new(diffuse.outputs["BSDF"], output.inputs["Surface"])
+        high.data.materials.clear()
+        high.data.materials.append(colour)
+        run("albedo", "DIFFUSE", True, passes={"COLOR"})
+        with open(f"{out_dir}/blender.json", "w") as f:
+            json.dump({"version": bpy.app.version_string, "seconds": seconds}, f, indent=2)
+        return
     run("normal_tangent", "NORMAL", True, "TANGENT")
     run("normal_object", "NORMAL", True, "OBJECT")
     run("position_high", "POSITION", True)
@@ -107,5 +129,8 @@ def main(high_path, low_path, res, max_distance, out_dir, ao_samples=0, ao_dista
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), sys.argv[5],
-         *([int(sys.argv[6]), float(sys.argv[7])] if len(sys.argv) > 7 else []))
+    if len(sys.argv) > 7 and sys.argv[6] == "albedo":
+        main(*sys.argv[1:3], int(sys.argv[3]), float(sys.argv[4]), sys.argv[5], texture=sys.argv[7])
+    else:
+        main(sys.argv[1], sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), sys.argv[5],
+             *([int(sys.argv[6]), float(sys.argv[7])] if len(sys.argv) > 7 else []))
