@@ -218,7 +218,6 @@ class Baker:
             code), and counts.
         """
         H, W = height, width
-        names = surface.settings.names() if surface is not None else []
         fallback = surface_maps.fallbacks(surface.settings) if surface is not None else []
         C = 14 + dual_depth + len(fallback)
         # one device buffer for the whole map, viewed by NumPy without a copy at the end
@@ -241,11 +240,12 @@ class Baker:
             dr.scatter(tri_hit, 1, s.prim)
             r = trace(self.high_dev, self.low_dev, s.prim, s.b1, s.b2, max_distance, delta,
                       dual_depth, continuation)
-            extra = []
+            surface_values = []
             if surface is not None:
                 key = (mi.UInt64(s.texel) + dr.opaque(mi.UInt64, row0 * W)) * keys + mi.UInt64(s.sub)
-                extra = surface.evaluate(r, key, delta)
-            _texel_average(r, s.texel, n_rows * W, aa, max_distance, flat, row0 * W, extra, fallback)
+                surface_values = surface.evaluate(r, key, delta)
+            _texel_average(r, s.texel, n_rows * W, aa, max_distance, flat, row0 * W,
+                           surface_values, fallback)
             if progress is not None:
                 progress(f"  rows {row0 + n_rows}/{H} traced ({time.perf_counter() - start:.1f} s)")
         ores = min(max(width, height), OVERLAP_RESOLUTION)

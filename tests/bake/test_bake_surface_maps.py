@@ -228,7 +228,6 @@ def test_albedo_checker_transfer(variant, tmp_path):
     v = 1 - u
     U, V = np.meshgrid(u, v, indexing="xy")
     cu, cv = U * 8, V * 8
-    odd = (np.floor(cu) + np.floor(cv)) % 2 == 1
     # the checker's rows run top-down (row 0 at v = 1): cell row = 3 - floor(4 v_high) mod 4
     odd = (np.floor(cu) + (3 - np.floor(cv) % 4)) % 2 == 1
     away = (np.abs(cu - np.round(cu)) > 0.15) & (np.abs(cv - np.round(cv)) > 0.15)
