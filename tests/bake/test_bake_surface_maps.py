@@ -285,3 +285,42 @@ def test_directx_green(variant, sphere_pair, tmp_path):
               for g in runs}
     assert errors["-y"]["mean_deg"] == pytest.approx(errors["+y"]["mean_deg"], abs=1e-3)
     assert errors["-y"]["mean_deg"] < 0.5
+
+
+def test_cli_surface_maps_and_green(variant, tmp_path, capsys):
+    """`mi-displace bake` with the surface-map options: the files, the settings in bake.json
+    and the sidecars, the fragment's green; a bad --green is refused by the parser."""
+    import json
+
+    from mi_displace.bake.meshdata import save_obj
+    from mi_displace.cli import main
+
+    high, low = _floor_and_ceiling(0.2)
+    save_obj(tmp_path / "high.obj", high.positions, high.faces)
+    save_obj(tmp_path / "low.obj", low.positions, low.faces, low.uvs)
+    texture = tmp_path / "texture.png"
+    bitmap = mi.Bitmap(np.full((4, 4, 3), 128, np.uint8), pixel_format=mi.Bitmap.PixelFormat.RGB)
+    bitmap.set_srgb_gamma(True)
+    bitmap.write(str(texture))
+    args = ["bake", "--high", str(tmp_path / "high.obj"), "--low", str(tmp_path / "low.obj"),
+            "--res", "8", "--out", str(tmp_path / "out"), "--max-distance", "0.05",
+            "--formats", "ao_float,cavity,normal_tangent", "--ao-samples", "4",
+            "--ao-distance", "0.4", "--ao-seed", "5", "--curvature-range", "2", "--green=-y"]
+    assert main(args) == 0
+    rec = json.loads((tmp_path / "out" / "bake.json").read_text())["settings"]
+    assert rec["ao"] == {"samples": 4, "distance": 0.4, "seed": 5, "point": "high-poly hit"}
+    assert rec["green"] == "-y" and rec["curvature_range"] == 2.0
+    assert json.loads((tmp_path / "out" / "cavity.png.json").read_text())["curvature_range"] == 2.0
+    assert 'value="-y"' in (tmp_path / "out" / "mitsuba_normalmap.xml").read_text()
+    ao = np.asarray(mi.Bitmap(str(tmp_path / "out" / "ao_float.exr")))
+    assert np.all(np.isfinite(ao)) and 0.0 <= ao.min() and ao.max() <= 1.0
+    # --high-texture adds the albedo map: a uniform grey 128 (sRGB) reads back as its linear value
+    save_obj(tmp_path / "high_uv.obj", high.positions, high.faces, high.positions[:, :2])
+    assert main(args[:2] + [str(tmp_path / "high_uv.obj")] + args[3:8] + [str(tmp_path / "tex")]
+                + args[9:] + ["--high-texture", str(texture)]) == 0
+    albedo = mi.load_dict({"type": "bitmap", "filename": str(tmp_path / "tex" / "albedo.png")})
+    grey = ((128 / 255 + 0.055) / 1.055) ** 2.4
+    assert np.abs(np.asarray(mi.traverse(albedo)["data"]) - grey).max() < 2e-3
+    with pytest.raises(SystemExit):
+        main(args[:-1] + ["--green", "z"])
+    capsys.readouterr()
