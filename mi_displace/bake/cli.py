@@ -66,7 +66,8 @@ def add_commands(sub) -> dict:
     p.add_argument("--high-texture", default=None,
                    help="the high-poly's colour texture (looked up with its UVs): bakes albedo")
     p.add_argument("--green", choices=("+y", "-y"), default="+y",
-                   help="tangent-space normal map convention: +y OpenGL (default), -y DirectX")
+                   help="tangent-space normal map convention: +y OpenGL (default), -y DirectX "
+                        "(write --green=-y)")
     p.add_argument("--preview", action="store_true",
                    help="render the high-poly and every scene fragment side by side with FLIP "
                         "(preview.png, preview.json)")
