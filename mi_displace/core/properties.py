@@ -83,7 +83,7 @@ class Param:
     def range_text(self) -> str:
         """The accepted values, as the reference prints them."""
         if self.choices:
-            text = " | ".join(self.choices)
+            text = ", ".join(self.choices)
         elif self.low is not None or self.high is not None:
             lo = "(-inf" if self.low is None else f"{'(' if self.open_low else '['}{self.low:g}"
             hi = "inf)" if self.high is None else f"{self.high:g}{')' if self.open_high else ']'}"
