@@ -379,7 +379,7 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
             (:mod:`occlusion`).
         curvature_range: H_ref [1 / object units] of the curvature and cavity maps (formats
             ``curvature``, ``cavity`` and their ``_float``); default the 99th percentile of
-            |H| over the measured texels (:mod:`curvature`).
+            ``|H|`` over the measured texels (:mod:`curvature`).
         high_texture / high_colors: the high-poly's colour for the albedo maps: an image
             (path or (H, W, 3) linear RGB) looked up with the high-poly's UVs, or (V, 3)
             linear RGB per high-poly vertex; giving one adds ``albedo`` to the formats if
