@@ -233,7 +233,7 @@ class MesostructureBSDF(mi.BSDF):
         # is the view (T', silhouettes) and si.wi the light.  Mitsuba's ptracer applies
         # Veach's shading-normal correction between si.sh_frame and the geometric normal
         # itself, so the meso normal needs it only relative to si.sh_frame:
-        # f*(wi -> wo) = f(wo -> wi) |wi . n_m| |wo . n_s| / |wi . n_s| (Veach 1997 §5.3, eq. 5.19)
+        # f*(wi -> wo) = f(wo -> wi) |wi . n_m| |wo . n_s| / |wi . n_s| (Veach 1997, §5.3)
         si_v = mi.SurfaceInteraction3f(si)
         si_v.wi = wo
         radiance = mi.BSDFContext(mi.TransportMode.Radiance, ctx.type_mask, ctx.component)
