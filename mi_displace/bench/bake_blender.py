@@ -29,6 +29,12 @@ Compared per texel where both bakers measured the high-poly:
   (projection + AO + padding) against Blender's AO bake in the same run;
 * curvature: Blender has no curvature bake; its Geometry > Pointiness baked as emission
   against our mean curvature H: Pearson correlation over the texels both measured;
+* Blender decodes our maps (:func:`compare_blender_decode`): ``normal_tangent.png`` and
+  ``float_normal.exr`` through Blender's Normal Map node, baked in object space on the
+  low-poly, against our MikkTSpace decode of the same file and against our object-space
+  normals, per texel, on chart borders and inside (:func:`normal_agreement`); and (not in
+  ``--quick``) the picture: the low-poly under ``mikk_normalmap`` against the high-poly in
+  Mitsuba (:func:`render_mikk`, FLIP on borders and inside);
 * albedo (:func:`compare_albedo`): Spot itself (its own UVs) under a procedural sRGB texture
   over a 1,000-face low-poly, our ``albedo`` map against Cycles' DIFFUSE colour bake, and
   both times.
@@ -79,7 +85,124 @@ def _stats(x) -> dict:
     return {"median": float(np.median(x)), "p99": float(np.percentile(x, 99)), "max": float(x.max())}
 
 
-def compare_pair(high, res: int, out: Path, target_faces: int) -> dict:
+def normal_agreement(a: np.ndarray, b: np.ndarray, measured: np.ndarray,
+                     border: np.ndarray) -> dict:
+    """Per-texel angle between two normal maps of the same space, over all ``measured``
+    texels and separately over those on a UV chart border and inside the charts.
+
+    Args:
+        a, b: (H, W, 3) normals (any non-zero length; compared by direction).
+        measured: (H, W) bool, the texels to compare.
+        border: (H, W) bool, chart-border texels (:func:`mi_displace.bake.preview.chart_border`).
+
+    Returns:
+        ``{"all" | "border" | "interior": {"texels", "median_deg", "p95_deg", "max_deg",
+        "pct_over_1deg"}}`` [degrees; percent of that part's texels]; the statistics are
+        None for a part without texels.
+    """
+    angle = _angle_deg(a[measured], b[measured])
+    at_border = border[measured]
+
+    def part(x):
+        if not len(x):
+            return {"texels": 0, "median_deg": None, "p95_deg": None, "max_deg": None,
+                    "pct_over_1deg": None}
+        return {"texels": int(len(x)), "median_deg": float(np.median(x)),
+                "p95_deg": float(np.percentile(x, 95)), "max_deg": float(x.max()),
+                "pct_over_1deg": float(100 * (x > 1).mean())}
+
+    return {"all": part(angle), "border": part(angle[at_border]),
+            "interior": part(angle[~at_border])}
+
+
+def facing_away(low, width: int, height: int) -> np.ndarray:
+    """(height, width) bool: texel centres where the low-poly's interpolated vertex normal
+    points away from its triangle's geometric normal (a fold).  Cycles shades such a point
+    as a back face and flips the normal it decodes there; MikkTSpace (ours) does not."""
+    from mi_displace.bake.meshdata import vertex_normals
+    from mi_displace.bake.uv_raster import UVLayout, rasterize_rows
+
+    s = rasterize_rows(UVLayout(low), width, height, 0, height, 1, conservative=False)
+    texel, f = np.asarray(s.texel, np.int64), np.asarray(s.prim, np.int64)
+    w = np.stack([1 - np.asarray(s.b1) - np.asarray(s.b2), np.asarray(s.b1), np.asarray(s.b2)], 1)
+    n = (vertex_normals(low.positions, low.faces)[low.faces[f]] * w[..., None]).sum(1)
+    p = low.positions[low.faces[f]]
+    away = np.zeros(width * height, bool)
+    away[texel] = (n * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])).sum(1) < 0
+    return away.reshape(height, width)
+
+
+#: our tangent-space map files that Blender decodes (8-bit PNG, float EXR)
+DECODED_FILES = ("normal_tangent.png", "float_normal.exr")
+
+
+def compare_blender_decode(bake_dir: Path, low, normal_object: np.ndarray, measured: np.ndarray,
+                           out: Path, border: float = 2) -> dict:
+    """Blender's decode of our tangent-space maps (:func:`blender.decode`) against our
+    MikkTSpace decode of the same file (:func:`mikktspace.decode_tangent_map`) and against the
+    object-space normals we baked, per texel (:func:`normal_agreement`; chart border:
+    ``border`` texels), on the texels inside a UV triangle that both measured, the folds of
+    :func:`facing_away` left out (counted: ``folded_texels``, and how many of them Blender
+    decoded more than 90 degrees from us, ``folded_flipped``).
+
+    Args:
+        bake_dir: the bake's folder (``low.obj`` and :data:`DECODED_FILES`); low: its low-poly;
+        normal_object: (H, W, 3) our object-space normals; measured: (H, W) bool, texels
+        that found the high-poly; out: folder for Blender's files.
+
+    Returns:
+        ``{stem: {"texels_inside", "texels_blender", "folded_texels", "folded_flipped",
+        "blender_vs_our_decode",
+        "blender_vs_our_object", "our_decode_vs_our_object"}, "blender_s": {stem: s}}`` or
+        ``{"blender_reason": ...}`` when Blender cannot run.
+    """
+    import mitsuba as mi
+
+    from mi_displace.bake.mikktspace import decode_tangent_map
+    from mi_displace.bake.preview import chart_border
+    from mi_displace.bench.peers import blender, measure
+
+    files = [bake_dir / name for name in DECODED_FILES]
+    out.mkdir(parents=True, exist_ok=True)
+    cycles, reason = measure(blender.decode, bake_dir / "low.obj", normal_object.shape[0], out, files)
+    if cycles is None:
+        return {"blender_reason": reason}
+    record = {}
+    folded = facing_away(low, *normal_object.shape[1::-1])
+    for file in files:
+        stored = np.asarray(mi.Bitmap(str(file)))[..., :3]
+        colour = stored / np.iinfo(stored.dtype).max if stored.dtype.kind == "u" else stored
+        ours, inside = decode_tangent_map(low, colour.astype(np.float64) * 2 - 1)
+        theirs = cycles["maps"][file.stem]
+        by_blender = np.any(theirs != 0, axis=-1)
+        both = inside & measured & by_blender
+        use = both & ~folded
+        at_border = chart_border(inside, border)
+        flipped = (theirs * ours).sum(-1) < 0
+        record[file.stem] = {
+            "texels_inside": int(inside.sum()), "texels_blender": int(by_blender.sum()),
+            "folded_texels": int((both & folded).sum()),
+            "folded_flipped": int((both & folded & flipped).sum()),
+            "blender_vs_our_decode": normal_agreement(theirs, ours, use, at_border),
+            "blender_vs_our_object": normal_agreement(theirs, normal_object, use, at_border),
+            "our_decode_vs_our_object": normal_agreement(ours, normal_object, use, at_border)}
+    return {**record, "blender_s": cycles["seconds"]}
+
+
+def render_mikk(high, bake_dir: Path, res: int = 128, spp: int = 16) -> dict:
+    """FLIP of the low-poly under ``mikk_normalmap`` on ``normal_tangent.png`` (and with no
+    map) against the high-poly, Mitsuba ``path`` at ``res``^2, ``spp`` samples
+    (:func:`mi_displace.bake.preview.compare_bake`): ``{way: {"flip", "flip_border",
+    "flip_interior"}}``, plus the image size and samples."""
+    from mi_displace.bake.preview import compare_bake
+
+    result = compare_bake(high, bake_dir, res=res, spp=spp, ways=("mikk", "no_map"))
+    return {"res": res, "spp": spp, **{way: {k: result[way][k] for k in
+                                            ("flip", "flip_border", "flip_interior")}
+                                      for way in ("mikk", "no_map")}}
+
+
+def compare_pair(high, res: int, out: Path, target_faces: int, render: bool = False) -> dict:
     from mi_displace.bake.baker import bake
     from mi_displace.bake.meshdata import load_mesh, save_obj
     from mi_displace.bake.mikktspace import decode_tangent_map
@@ -144,6 +267,10 @@ def compare_pair(high, res: int, out: Path, target_faces: int) -> dict:
     ao_ours, ao_b = rao.maps["ao"][both], b["ao"][both, 0]
     pointiness = b["pointiness"][both, 0]
     H = rcurv.maps["curvature"][both]
+    decode = compare_blender_decode(out / "ours", low, r.maps["normal_object"], ours_hit,
+                                    out / "decode")
+    if render:
+        decode["mitsuba_render"] = render_mikk(high, out / "ours")
     return {
         **pair, "blender": cycles["version"],
         "coverage": {"blender_measured": int(b_hit.sum()),
@@ -167,6 +294,7 @@ def compare_pair(high, res: int, out: Path, target_faces: int) -> dict:
         "curvature_vs_pointiness": {"pearson": float(np.corrcoef(H, pointiness)[0, 1]),
                                     "ours_s": rcurv.record["timings"]["bake_s"],
                                     "blender_pointiness_s": cycles["seconds"]["pointiness"]},
+        "blender_decodes_ours": decode,
         "time": {"blender_normal_tangent_object_position_s": blender_s,
                  "blender_each_s": cycles["seconds"], "ratio_ours_bake_over_blender": ours_bake / blender_s},
     }
@@ -232,8 +360,8 @@ def run(out=None, quick: bool = False) -> dict:
         record = {"spot_displaced": compare_pair(spot_displaced(1), 128, out / "spot", 1000),
                   "spot_albedo": compare_albedo(128, out / "albedo")}
     else:
-        record = {"spot_displaced": compare_pair(spot_displaced(), 1024, out / "spot", 3000),
-                  "bunny": compare_pair(load_mesh(BUNNY, "bunny"), 1024, out / "bunny", 5000),
+        record = {"spot_displaced": compare_pair(spot_displaced(), 1024, out / "spot", 3000, True),
+                  "bunny": compare_pair(load_mesh(BUNNY, "bunny"), 1024, out / "bunny", 5000, True),
                   "spot_albedo": compare_albedo(1024, out / "albedo")}
     (out / "bake_blender.json").write_text(_json.dumps(record, indent=2))
     record["out"] = str(out)

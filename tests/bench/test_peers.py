@@ -48,6 +48,9 @@ def test_blender_without_bpy_is_unavailable(fails_to_import, says, monkeypatch, 
     value, reason = peers.measure(blender.bake, tmp_path / "h.obj", tmp_path / "l.obj", 8, 0.1, out)
     assert value is None and reason.startswith("peer unavailable: ") and says in reason
     assert not list(out.iterdir())   # nothing ran
+    value, reason = peers.measure(blender.decode, tmp_path / "l.obj", 8, out, [tmp_path / "m.png"])
+    assert value is None and reason.startswith("peer unavailable: ") and says in reason
+    assert not list(out.iterdir())
 
 
 def test_measure_lets_bugs_through():

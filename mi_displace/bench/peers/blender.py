@@ -58,3 +58,28 @@ def bake(high_obj: Path, low_obj: Path, res: int, max_distance: float, out_dir: 
     names = ("albedo",) if texture is not None else MAPS + (AO_MAPS if ao_samples else ())
     return {"maps": {name: np.load(out_dir / f"{name}.npy") for name in names},
             "version": record["version"], "seconds": record["seconds"]}
+
+
+def decode(low_obj: Path, res: int, out_dir: Path, maps) -> dict:
+    """Blender's decode of our tangent-space normal maps on ``low_obj``: each map file
+    (``(x + 1) / 2`` encoded, OpenGL green) through Image Texture (Non-Color) -> Normal Map
+    (tangent space, the low-poly's UV map) -> Diffuse BSDF, baked by Cycles as NORMAL in
+    object space on the low-poly alone, ``res`` x ``res`` texels.
+
+    Returns:
+        ``{"maps": {stem: (res, res, 3) float32 decoded unit normals (0 where Cycles baked
+        nothing), row 0 = top}, "version": Blender's, "seconds": {stem: seconds of its bake}}``
+        with ``stem`` each map's file name without suffix.
+    """
+    maps = [Path(m) for m in maps]
+    subprocess.run([python(), str(Path(__file__).with_name("blender_side.py")), "decode",
+                    str(low_obj), str(res), str(out_dir), *map(str, maps)],
+                   check=True, capture_output=True)
+    record = json.loads((out_dir / "blender_decode.json").read_text())
+    decoded = {}
+    for m in maps:
+        colour = np.load(out_dir / f"decode_{m.stem}.npy")[..., :3]
+        n = colour * 2 - 1
+        # Cycles clears what it does not bake to (0, 0, 0), which stays 0 here
+        decoded[m.stem] = np.where(np.any(colour != 0, axis=-1, keepdims=True), n, 0)
+    return {"maps": decoded, "version": record["version"], "seconds": record["seconds"]}

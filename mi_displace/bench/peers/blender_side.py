@@ -5,6 +5,7 @@ Run by a Python that has ``bpy`` (Blender as a module), not by mi_displace's own
 
     python blender_side.py HIGH.obj LOW.obj RES MAX_DISTANCE OUT_DIR [AO_SAMPLES AO_DISTANCE]
     python blender_side.py HIGH.obj LOW.obj RES MAX_DISTANCE OUT_DIR albedo TEXTURE.png
+    python blender_side.py decode LOW.obj RES OUT_DIR MAP...
 
 Imports both OBJs without axis conversion (object coordinates unchanged; the low-poly keeps
 the normals written in its ``vn`` lines as custom normals, the high-poly is smooth-shaded),
@@ -25,6 +26,12 @@ The ``albedo`` form bakes only ``albedo``: the high-poly (with its UVs) under a 
 material whose colour is TEXTURE.png (an sRGB image, linear interpolation), Cycles' DIFFUSE
 bake with the colour pass alone, selected to active.
 
+The ``decode`` form (:func:`decode`) bakes how Blender *decodes* tangent-space normal maps:
+each MAP (a file of ours, (x + 1) / 2 encoded) through Image Texture (Non-Color, linear) ->
+Normal Map (tangent space, the low-poly's UV map) -> Diffuse BSDF normal on the low-poly,
+then Cycles' NORMAL bake in object space on the low-poly alone (no selected-to-active):
+``OUT_DIR/decode_<MAP's stem>.npy``, colours (N + 1) / 2.
+
 Cycles clears the texels it does not bake to (0, 0, 0).  ``OUT_DIR/blender.json`` holds the
 seconds of each ``bpy.ops.object.bake`` call and Blender's version.
 """
@@ -42,17 +49,66 @@ def _import(path):
     return bpy.context.selected_objects[0]
 
 
-def main(high_path, low_path, res, max_distance, out_dir, ao_samples=0, ao_distance=1.0,
-         texture=None):
+def _setup(res):
+    """An empty Cycles scene (CPU, one sample) and the (res, res) float image to bake into."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
     scene.cycles.samples = 1
+    return scene, bpy.data.images.new("bake", res, res, alpha=True, float_buffer=True)
+
+
+def _save(image, res, path):
+    px = np.empty(res * res * 4, np.float32)
+    image.pixels.foreach_get(px)
+    np.save(path, px.reshape(res, res, 4)[::-1].copy())
+
+
+def decode(low_path, res, out_dir, maps):
+    """Blender's decode of each tangent-space map in ``maps`` on the low-poly (module
+    docstring); seconds of each bake in ``OUT_DIR/blender_decode.json``."""
+    scene, image = _setup(res)
+    low = _import(low_path)
+    bpy.context.view_layer.objects.active = low
+    low.select_set(True)
+    uv_map = low.data.uv_layers.active.name
+    seconds = {}
+    for path in maps:
+        mat = bpy.data.materials.new("decode")
+        mat.use_nodes = True
+        nodes, links = mat.node_tree.nodes, mat.node_tree.links
+        nodes.clear()
+        lookup, normal_map = nodes.new("ShaderNodeTexImage"), nodes.new("ShaderNodeNormalMap")
+        diffuse, output = nodes.new("ShaderNodeBsdfDiffuse"), nodes.new("ShaderNodeOutputMaterial")
+        lookup.image = bpy.data.images.load(path)
+        lookup.image.colorspace_settings.name = "Non-Color"
+        lookup.interpolation = "Linear"
+        normal_map.space, normal_map.uv_map = "TANGENT", uv_map
+        links.new(lookup.outputs["Color"], normal_map.inputs["Color"])
+        links.new(normal_map.outputs["Normal"], diffuse.inputs["Normal"])
+        links.new(diffuse.outputs["BSDF"], output.inputs["Surface"])
+        target = nodes.new("ShaderNodeTexImage")   # the bake's target: active, not linked
+        target.image = image
+        nodes.active = target
+        low.data.materials.clear()
+        low.data.materials.append(mat)
+        stem = path.rsplit("/", 1)[-1].rsplit(".", 1)[0]
+        start = time.perf_counter()
+        bpy.ops.object.bake(type="NORMAL", use_selected_to_active=False, normal_space="OBJECT",
+                            margin=0)
+        seconds[stem] = time.perf_counter() - start
+        _save(image, res, f"{out_dir}/decode_{stem}.npy")
+    with open(f"{out_dir}/blender_decode.json", "w") as f:
+        json.dump({"version": bpy.app.version_string, "seconds": seconds}, f, indent=2)
+
+
+def main(high_path, low_path, res, max_distance, out_dir, ao_samples=0, ao_distance=1.0,
+         texture=None):
+    scene, image = _setup(res)
     high, low = _import(high_path), _import(low_path)
     for poly in high.data.polygons:
         poly.use_smooth = True
-    image = bpy.data.images.new("bake", res, res, alpha=True, float_buffer=True)
     mat = bpy.data.materials.new("bake")
     mat.use_nodes = True
     node = mat.node_tree.nodes.new("ShaderNodeTexImage")
@@ -80,9 +136,7 @@ def main(high_path, low_path, res, max_distance, out_dir, ao_samples=0, ao_dista
                             cage_extrusion=max_distance, max_ray_distance=2 * max_distance,
                             margin=0, normal_g=green, **({"pass_filter": passes} if passes else {}))
         seconds[name] = time.perf_counter() - start
-        px = np.empty(res * res * 4, np.float32)
-        image.pixels.foreach_get(px)
-        np.save(f"{out_dir}/{name}.npy", px.reshape(res, res, 4)[::-1].copy())
+        _save(image, res, f"{out_dir}/{name}.npy")
 
     if texture is not None:
         colour = bpy.data.materials.new("albedo")
@@ -129,7 +183,9 @@ def main(high_path, low_path, res, max_distance, out_dir, ao_samples=0, ao_dista
 
 
 if __name__ == "__main__":
-    if len(sys.argv) > 7 and sys.argv[6] == "albedo":
+    if sys.argv[1] == "decode":
+        decode(sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5:])
+    elif len(sys.argv) > 7 and sys.argv[6] == "albedo":
         main(*sys.argv[1:3], int(sys.argv[3]), float(sys.argv[4]), sys.argv[5], texture=sys.argv[7])
     else:
         main(sys.argv[1], sys.argv[2], int(sys.argv[3]), float(sys.argv[4]), sys.argv[5],
