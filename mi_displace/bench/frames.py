@@ -27,6 +27,11 @@ reference geometry, all in one process, at ``res`` x ``res`` pixels:
   ``cache_misses`` (of them, kernels compiled anew: a view-dependent value traced as a
   constant), ``codegen_ms`` (Dr.Jit's IR generation), ``compile_ms`` (LLVM / PTX compilation
   of the misses); ``edit_profile``: the same of one more edit frame, at a value no frame had;
+* ``fixed_frame_s``: the fixed cost per frame, the median frame with the film at
+  :data:`FIXED_RES` squared (:func:`fixed_cost`; ``fixed_kernel_share``, ``fixed_kernels``);
+* ``frozen_frame_s``, ``frozen_ratio``, ``frozen_identical``, ``frozen_error``: the whole
+  frame under ``dr.freeze`` on that film, against the plain frame, images compared bit for bit
+  also after a camera move and an edit (:func:`freeze_lever`);
 * ``peak_rss_mb``: the process's peak resident memory after the row
   (``resource.getrusage``), ``jit_peak_mb``: the peak of Dr.Jit's allocator for the variant's
   backend (``drjit.detail.malloc_watermark``); both only grow, so a row's own peak shows as a
@@ -236,6 +241,55 @@ def camera_move_profile(scene, angles, render) -> tuple[dict, bool, list]:
     return profile, moved, images
 
 
+#: Film side of the frames that measure the fixed cost per frame (:func:`fixed_cost`), pixels.
+FIXED_RES = 8
+
+
+def fixed_cost(sensor, frame, count: int) -> dict:
+    """What a frame costs that has (almost) no pixels: the film of ``sensor`` (its
+    ``mi.traverse`` parameters) set to :data:`FIXED_RES` squared, one frame to compile, then
+    ``fixed_frame_s``: the median wall seconds of ``count`` calls of ``frame()`` — Python,
+    tracing, launches and the passes whose size does not follow the film (slices, tables,
+    light grids), with ``fixed_kernel_share`` and ``fixed_kernels`` of one more under
+    :func:`_profile`.  The film stays at that size."""
+    sensor["film.size"] = mi.ScalarVector2u(FIXED_RES, FIXED_RES)
+    sensor.update()
+    frame()
+    times = _series(lambda _: frame(), range(count))
+    profile = _profile(frame)
+    return {"fixed_frame_s": statistics.median(times), "fixed_kernel_share": profile["kernel_share"],
+            "fixed_kernels": profile["kernels"]}
+
+
+def freeze_lever(plain, frozen, call, changes, count: int) -> dict:
+    """``dr.freeze`` of the whole frame, measured on the film :func:`fixed_cost` left: the
+    frame ``plain()`` and the frozen function ``frozen`` (called as ``call(frozen)``), each
+    recorded or compiled once and then timed ``count`` times; their images compared bit for
+    bit now and after each of ``changes`` (a camera move, an edit): a value the recording
+    baked in (a C++ scalar traced as a literal) shows as a different image.
+
+    Returns ``frozen_frame_s`` (median), ``frozen_ratio`` (frozen / plain medians),
+    ``frozen_identical`` (all images equal) and ``frozen_error`` (why the recording failed:
+    the first line of Dr.Jit's reason; the other fields are then None)."""
+    def image(render):
+        return np.array(render())
+
+    try:
+        image(plain)
+        plain_s = statistics.median(_series(lambda _: image(plain), range(count)))
+        image(lambda: call(frozen))
+        frozen_s = statistics.median(_series(lambda _: image(lambda: call(frozen)), range(count)))
+        identical = np.array_equal(image(plain), image(lambda: call(frozen)))
+        for change in changes:
+            change()
+            identical &= np.array_equal(image(plain), image(lambda: call(frozen)))
+    except RuntimeError as error:   # Dr.Jit refused to record (a read-back or evaluation inside)
+        why = str(error.__cause__ or error).strip().splitlines()[0]   # the cause names the reason
+        return {"frozen_frame_s": None, "frozen_ratio": None, "frozen_identical": None, "frozen_error": why}
+    return {"frozen_frame_s": frozen_s, "frozen_ratio": frozen_s / plain_s,
+            "frozen_identical": bool(identical), "frozen_error": None}
+
+
 def measure(row: Row, sizes: Sizes) -> dict:
     """The record of one row (fields in the module doc)."""
     from mi_displace.render.scene import load
@@ -285,6 +339,11 @@ def measure(row: Row, sizes: Sizes) -> dict:
     edit_times = _series(edit, factors)
     check()
     edit_profile = _profile(lambda: edit((factors[0] + factors[1]) / 2))   # a value new to this run
+    fixed = fixed_cost(sensor, frame, sizes.orbit)
+    frozen = freeze_lever(lambda: mi.render(scene, integrator=integrator, spp=1),
+                          dr.freeze(lambda scene, integrator: mi.render(scene, integrator=integrator, spp=1)),
+                          lambda frozen: frozen(scene, integrator),
+                          [lambda: move(unseen), lambda: edit(factors[0])], sizes.orbit)
     orbit_s = statistics.median(orbit)
     paper = max(row.paper.fps) if row.paper.fps else None
     record = {
@@ -301,6 +360,8 @@ def measure(row: Row, sizes: Sizes) -> dict:
         "fps_vs_paper": (1.0 / orbit_s) / paper if paper else None,
         **profile,
         "edit_profile": edit_profile,
+        **fixed,
+        **frozen,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "jit_peak_mb": dr.detail.malloc_watermark(dr.backend_v(mi.Float)) / 2**20,
     }
@@ -324,15 +385,22 @@ def run(sizes: Sizes = FULL) -> dict:
             "rows": rows, "cpu_count": os.cpu_count(), "load_average": os.getloadavg()[0]}
 
 
+def _frozen_cell(r: dict) -> str:
+    """The frozen / plain ratio of a row, "≠" after it when the images differed, or "refused"."""
+    if r["frozen_ratio"] is None:
+        return "refused"
+    return f"{r['frozen_ratio']:.3f}" + ("" if r["frozen_identical"] else " ≠")
+
+
 def markdown(record: dict) -> str:
     """The rows of ``record`` as a markdown table (milliseconds for frames, seconds for loads)."""
     def cell(value, fmt):
         return "–" if value is None else format(value, fmt)
 
     lines = ["| row | load s | first frame s | still frame ms | orbit frame ms | edit frame ms | fps "
-             "| paper fps | × paper | kernels % | launches (compiled) | compile ms orbit / edit | peak RSS MB "
-             "| Dr.Jit peak MB |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "| paper fps | × paper | kernels % | launches (compiled) | compile ms orbit / edit "
+             f"| fixed ms ({FIXED_RES}²) | frozen / plain | peak RSS MB | Dr.Jit peak MB |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in record["rows"]:
         paper = "–" if r["paper_fps"] is None else "–".join(f"{f:g}" for f in dict.fromkeys(r["paper_fps"]))
         lines.append(
@@ -340,7 +408,7 @@ def markdown(record: dict) -> str:
             f"| {1e3 * r['orbit_frame_s']:.0f} | {1e3 * r['edit_frame_s']:.0f} | {r['fps']:.1f} | {paper} "
             f"| {cell(r['fps_vs_paper'], '.2f')} | {100 * r['kernel_share']:.0f} "
             f"| {r['kernels']} ({r['cache_misses']}) | {r['compile_ms']:.0f} / {r['edit_profile']['compile_ms']:.0f} "
-            f"| {r['peak_rss_mb']:.0f} "
+            f"| {1e3 * r['fixed_frame_s']:.1f} | {_frozen_cell(r)} | {r['peak_rss_mb']:.0f} "
             f"| {r['jit_peak_mb']:.0f} |")
     return "\n".join(lines)
 
