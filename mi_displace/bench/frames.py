@@ -37,8 +37,10 @@ reference geometry, all in one process, at ``res`` x ``res`` pixels:
   backend (``drjit.detail.malloc_watermark``); both only grow, so a row's own peak shows as a
   step from the row before.
 
-Every frame is ``mi.render`` at one sample per pixel (``raster`` with ``aa=1``, as a GPU draws
-it; the volume slicer with the scene's own integrator and ``aa``), evaluated and synchronised.
+Every frame is ``mi.render`` at one sample per pixel, as a GPU draws it and as the papers
+measured: ``raster`` with ``aa=1``, the volume slicer with the scene's own settings but ``aa``
+1 (one ray a pixel, each slice drawn once per pixel: :func:`frame_integrator`), evaluated
+and synchronised.
 Python's garbage is collected before and the collector paused during the timed frames.
 
 ``--quick`` runs every row with :data:`QUICK` sizes (64^2, 3 positions, 3 edits, small tables
@@ -80,8 +82,9 @@ class Row(NamedTuple):
     ``--quick``; ``edit_key``: the ``mi.traverse`` key (or its ending, :func:`_edit_key`) of
     its main parameter, or where that is not exposed of a colour (a number or a colour, scaled
     by the edit factors);
-    ``integrator``: ``"raster"`` (rendered by ``raster`` with ``aa=1``) or ``"scene"`` (the
-    scene's own); ``paper``: the paper's frame rate."""
+    ``integrator``: ``"raster"`` (rendered by ``raster`` with ``aa=1``) or ``"volume_slicer"``
+    (the scene's own, at one ray a pixel: :func:`frame_integrator`); ``paper``: the paper's
+    frame rate."""
     name: str
     scene: str
     params: dict
@@ -129,7 +132,7 @@ ROWS = (
     Row("restored", "bake_bunny.xml", {"mode": "approximation", "integrator": "raster"},
         {}, "reflectance.value", "raster", _NO_RATE),
     Row("volume_slicer", "volume_nucleon_pull.xml",
-        {"mode": "approximation", "integrator": "volume_slicer"}, {}, "volume.map0_amount", "scene",
+        {"mode": "approximation", "integrator": "volume_slicer"}, {}, "volume.map0_amount", "volume_slicer",
         Paper((6.24, 18.81), "volume Table 1: 134-256 voxel data sets, 512^2, Quadro FX 4400")),
     Row("raster_reference", "vdm_torus.xml", {"mode": "reference", "integrator": "raster"},
         {"resolution": 256}, "scale", "raster", _NO_RATE),
@@ -290,6 +293,18 @@ def freeze_lever(plain, frozen, call, changes, count: int) -> dict:
             "frozen_identical": bool(identical), "frozen_error": None}
 
 
+def frame_integrator(row: Row, scene):
+    """What draws ``row``'s frames at one sample per pixel: ``raster`` with ``aa=1`` for
+    ``"raster"`` rows; for ``"volume_slicer"`` rows the scene's own ``volume_slicer`` with its
+    ``aa`` set to 1 (the packaged scenes use 2, i.e. 4 rays a pixel, for their comparisons
+    against ``volpath``; the paper draws each slice once per pixel)."""
+    if row.integrator == "raster":
+        return mi.load_dict({"type": "raster", "aa": 1})
+    integrator = scene.integrator()
+    integrator.settings.aa = 1
+    return integrator
+
+
 def measure(row: Row, sizes: Sizes) -> dict:
     """The record of one row (fields in the module doc)."""
     from mi_displace.render.scene import load
@@ -298,7 +313,7 @@ def measure(row: Row, sizes: Sizes) -> dict:
     rng = np.random.default_rng()   # unseeded on purpose: see _spread
     gc.collect()
     scene, timings = load(scene_path(row.scene), **params)
-    integrator = mi.load_dict({"type": "raster", "aa": 1}) if row.integrator == "raster" else scene.integrator()
+    integrator = frame_integrator(row, scene)
 
     images = []
 

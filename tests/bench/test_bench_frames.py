@@ -129,3 +129,23 @@ def test_fixed_cost_renders_a_tiny_film(variant_llvm):
     record = frames.fixed_cost(sensor, frame, 3)
     assert set(sizes) == {(frames.FIXED_RES, frames.FIXED_RES)} and len(sizes) == 5
     assert record["fixed_frame_s"] > 0 and 0 <= record["fixed_kernel_share"] <= 1 and record["fixed_kernels"] >= 1
+
+
+def test_volume_slicer_row_draws_one_ray_a_pixel(variant_llvm):
+    """The volume slicer row renders at one ray a pixel (the scene's own ``aa`` is 2): the
+    same image as a slicer made with ``aa`` 1 and the scene's other settings."""
+    import mitsuba as mi
+
+    from mi_displace.bench import frames
+    from mi_displace.core.resources import scene_path
+    from mi_displace.render.scene import load
+
+    row = next(r for r in frames.ROWS if r.name == "volume_slicer")
+    scene, _ = load(scene_path(row.scene), **row.params, res=16)
+    plugin = scene.integrator().plugin
+    assert scene.integrator().settings.aa == 2
+    mine = mi.render(scene, integrator=frames.frame_integrator(row, scene), spp=1)
+    one = mi.load_dict({"type": "volume_slicer", "volume": plugin, "model": "scatter", "albedo": 0.8,
+                        "spacing": 1.0, "aa": 1})
+    assert np.isfinite(np.array(mine)).all()
+    np.testing.assert_array_equal(np.array(mine), np.array(mi.render(scene, integrator=one, spp=1)))
