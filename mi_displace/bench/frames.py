@@ -27,13 +27,20 @@ reference geometry, all in one process, at ``res`` x ``res`` pixels:
   ``cache_misses`` (of them, kernels compiled anew: a view-dependent value traced as a
   constant), ``codegen_ms`` (Dr.Jit's IR generation), ``compile_ms`` (LLVM / PTX compilation
   of the misses); ``edit_profile``: the same of one more edit frame, at a value no frame had;
+* ``fixed_frame_s``: the fixed cost per frame, the median frame with the film at
+  :data:`FIXED_RES` squared (:func:`fixed_cost`; ``fixed_kernel_share``, ``fixed_kernels``);
+* ``frozen_frame_s``, ``frozen_ratio``, ``frozen_identical``, ``frozen_error``: the whole
+  frame under ``dr.freeze`` on that film, against the plain frame, images compared bit for bit
+  also after a camera move and an edit (:func:`freeze_lever`);
 * ``peak_rss_mb``: the process's peak resident memory after the row
   (``resource.getrusage``), ``jit_peak_mb``: the peak of Dr.Jit's allocator for the variant's
   backend (``drjit.detail.malloc_watermark``); both only grow, so a row's own peak shows as a
   step from the row before.
 
-Every frame is ``mi.render`` at one sample per pixel (``raster`` with ``aa=1``, as a GPU draws
-it; the volume slicer with the scene's own integrator and ``aa``), evaluated and synchronised.
+Every frame is ``mi.render`` at one sample per pixel, as a GPU draws it and as the papers
+measured: ``raster`` with ``aa=1``, the volume slicer with the scene's own settings but ``aa``
+1 (one ray a pixel, each slice drawn once per pixel: :func:`frame_integrator`), evaluated
+and synchronised.
 Python's garbage is collected before and the collector paused during the timed frames.
 
 ``--quick`` runs every row with :data:`QUICK` sizes (64^2, 3 positions, 3 edits, small tables
@@ -75,8 +82,9 @@ class Row(NamedTuple):
     ``--quick``; ``edit_key``: the ``mi.traverse`` key (or its ending, :func:`_edit_key`) of
     its main parameter, or where that is not exposed of a colour (a number or a colour, scaled
     by the edit factors);
-    ``integrator``: ``"raster"`` (rendered by ``raster`` with ``aa=1``) or ``"scene"`` (the
-    scene's own); ``paper``: the paper's frame rate."""
+    ``integrator``: ``"raster"`` (rendered by ``raster`` with ``aa=1``) or ``"volume_slicer"``
+    (the scene's own, at one ray a pixel: :func:`frame_integrator`); ``paper``: the paper's
+    frame rate."""
     name: str
     scene: str
     params: dict
@@ -124,7 +132,7 @@ ROWS = (
     Row("restored", "bake_bunny.xml", {"mode": "approximation", "integrator": "raster"},
         {}, "reflectance.value", "raster", _NO_RATE),
     Row("volume_slicer", "volume_nucleon_pull.xml",
-        {"mode": "approximation", "integrator": "volume_slicer"}, {}, "volume.map0_amount", "scene",
+        {"mode": "approximation", "integrator": "volume_slicer"}, {}, "volume.map0_amount", "volume_slicer",
         Paper((6.24, 18.81), "volume Table 1: 134-256 voxel data sets, 512^2, Quadro FX 4400")),
     Row("raster_reference", "vdm_torus.xml", {"mode": "reference", "integrator": "raster"},
         {"resolution": 256}, "scale", "raster", _NO_RATE),
@@ -236,6 +244,67 @@ def camera_move_profile(scene, angles, render) -> tuple[dict, bool, list]:
     return profile, moved, images
 
 
+#: Film side of the frames that measure the fixed cost per frame (:func:`fixed_cost`), pixels.
+FIXED_RES = 8
+
+
+def fixed_cost(sensor, frame, count: int) -> dict:
+    """What a frame costs that has (almost) no pixels: the film of ``sensor`` (its
+    ``mi.traverse`` parameters) set to :data:`FIXED_RES` squared, one frame to compile, then
+    ``fixed_frame_s``: the median wall seconds of ``count`` calls of ``frame()`` — Python,
+    tracing, launches and the passes whose size does not follow the film (slices, tables,
+    light grids), with ``fixed_kernel_share`` and ``fixed_kernels`` of one more under
+    :func:`_profile`.  The film stays at that size."""
+    sensor["film.size"] = mi.ScalarVector2u(FIXED_RES, FIXED_RES)
+    sensor.update()
+    frame()
+    times = _series(lambda _: frame(), range(count))
+    profile = _profile(frame)
+    return {"fixed_frame_s": statistics.median(times), "fixed_kernel_share": profile["kernel_share"],
+            "fixed_kernels": profile["kernels"]}
+
+
+def freeze_lever(plain, frozen, call, changes, count: int) -> dict:
+    """``dr.freeze`` of the whole frame, measured on the film :func:`fixed_cost` left: the
+    frame ``plain()`` and the frozen function ``frozen`` (called as ``call(frozen)``), each
+    recorded or compiled once and then timed ``count`` times; their images compared bit for
+    bit now and after each of ``changes`` (a camera move, an edit): a value the recording
+    baked in (a C++ scalar traced as a literal) shows as a different image.
+
+    Returns ``frozen_frame_s`` (median), ``frozen_ratio`` (frozen / plain medians),
+    ``frozen_identical`` (all images equal) and ``frozen_error`` (why the recording failed:
+    the first line of Dr.Jit's reason; the other fields are then None)."""
+    def image(render):
+        return np.array(render())
+
+    try:
+        image(plain)
+        plain_s = statistics.median(_series(lambda _: image(plain), range(count)))
+        image(lambda: call(frozen))
+        frozen_s = statistics.median(_series(lambda _: image(lambda: call(frozen)), range(count)))
+        identical = np.array_equal(image(plain), image(lambda: call(frozen)))
+        for change in changes:
+            change()
+            identical &= np.array_equal(image(plain), image(lambda: call(frozen)))
+    except RuntimeError as error:   # Dr.Jit refused to record (a read-back or evaluation inside)
+        why = str(error.__cause__ or error).strip().splitlines()[0]   # the cause names the reason
+        return {"frozen_frame_s": None, "frozen_ratio": None, "frozen_identical": None, "frozen_error": why}
+    return {"frozen_frame_s": frozen_s, "frozen_ratio": frozen_s / plain_s,
+            "frozen_identical": bool(identical), "frozen_error": None}
+
+
+def frame_integrator(row: Row, scene):
+    """What draws ``row``'s frames at one sample per pixel: ``raster`` with ``aa=1`` for
+    ``"raster"`` rows; for ``"volume_slicer"`` rows the scene's own ``volume_slicer`` with its
+    ``aa`` set to 1 (the packaged scenes use 2, i.e. 4 rays a pixel, for their comparisons
+    against ``volpath``; the paper draws each slice once per pixel)."""
+    if row.integrator == "raster":
+        return mi.load_dict({"type": "raster", "aa": 1})
+    integrator = scene.integrator()
+    integrator.settings.aa = 1
+    return integrator
+
+
 def measure(row: Row, sizes: Sizes) -> dict:
     """The record of one row (fields in the module doc)."""
     from mi_displace.render.scene import load
@@ -244,7 +313,7 @@ def measure(row: Row, sizes: Sizes) -> dict:
     rng = np.random.default_rng()   # unseeded on purpose: see _spread
     gc.collect()
     scene, timings = load(scene_path(row.scene), **params)
-    integrator = mi.load_dict({"type": "raster", "aa": 1}) if row.integrator == "raster" else scene.integrator()
+    integrator = frame_integrator(row, scene)
 
     images = []
 
@@ -285,6 +354,11 @@ def measure(row: Row, sizes: Sizes) -> dict:
     edit_times = _series(edit, factors)
     check()
     edit_profile = _profile(lambda: edit((factors[0] + factors[1]) / 2))   # a value new to this run
+    fixed = fixed_cost(sensor, frame, sizes.orbit)
+    frozen = freeze_lever(lambda: mi.render(scene, integrator=integrator, spp=1),
+                          dr.freeze(lambda scene, integrator: mi.render(scene, integrator=integrator, spp=1)),
+                          lambda frozen: frozen(scene, integrator),
+                          [lambda: move(unseen), lambda: edit(factors[0])], sizes.orbit)
     orbit_s = statistics.median(orbit)
     paper = max(row.paper.fps) if row.paper.fps else None
     record = {
@@ -301,6 +375,8 @@ def measure(row: Row, sizes: Sizes) -> dict:
         "fps_vs_paper": (1.0 / orbit_s) / paper if paper else None,
         **profile,
         "edit_profile": edit_profile,
+        **fixed,
+        **frozen,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "jit_peak_mb": dr.detail.malloc_watermark(dr.backend_v(mi.Float)) / 2**20,
     }
@@ -324,15 +400,22 @@ def run(sizes: Sizes = FULL) -> dict:
             "rows": rows, "cpu_count": os.cpu_count(), "load_average": os.getloadavg()[0]}
 
 
+def _frozen_cell(r: dict) -> str:
+    """The frozen / plain ratio of a row, "≠" after it when the images differed, or "refused"."""
+    if r["frozen_ratio"] is None:
+        return "refused"
+    return f"{r['frozen_ratio']:.3f}" + ("" if r["frozen_identical"] else " ≠")
+
+
 def markdown(record: dict) -> str:
     """The rows of ``record`` as a markdown table (milliseconds for frames, seconds for loads)."""
     def cell(value, fmt):
         return "–" if value is None else format(value, fmt)
 
     lines = ["| row | load s | first frame s | still frame ms | orbit frame ms | edit frame ms | fps "
-             "| paper fps | × paper | kernels % | launches (compiled) | compile ms orbit / edit | peak RSS MB "
-             "| Dr.Jit peak MB |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "| paper fps | × paper | kernels % | launches (compiled) | compile ms orbit / edit "
+             f"| fixed ms ({FIXED_RES}²) | frozen / plain | peak RSS MB | Dr.Jit peak MB |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in record["rows"]:
         paper = "–" if r["paper_fps"] is None else "–".join(f"{f:g}" for f in dict.fromkeys(r["paper_fps"]))
         lines.append(
@@ -340,7 +423,7 @@ def markdown(record: dict) -> str:
             f"| {1e3 * r['orbit_frame_s']:.0f} | {1e3 * r['edit_frame_s']:.0f} | {r['fps']:.1f} | {paper} "
             f"| {cell(r['fps_vs_paper'], '.2f')} | {100 * r['kernel_share']:.0f} "
             f"| {r['kernels']} ({r['cache_misses']}) | {r['compile_ms']:.0f} / {r['edit_profile']['compile_ms']:.0f} "
-            f"| {r['peak_rss_mb']:.0f} "
+            f"| {1e3 * r['fixed_frame_s']:.1f} | {_frozen_cell(r)} | {r['peak_rss_mb']:.0f} "
             f"| {r['jit_peak_mb']:.0f} |")
     return "\n".join(lines)
 

@@ -25,8 +25,19 @@ texture memory, accuracy, and VTK's CPU volume renderer on the same volume.
   ...") when ``vtk`` or Mesa's EGL is missing (:mod:`mi_displace.bench.peers.vtk_volume`;
   ``scripts/setup_peers.sh`` installs them).
 
+* ``gridvolume``: the exact reference against Mitsuba's own medium (:func:`gridvolume_comparison`):
+  ``volume_walnut_peel.xml`` in ``reference`` mode (``volpath``, the ``displaced_volume`` on
+  the exact peel) and the same scene with the volume replaced by a ``gridvolume`` holding
+  that field resampled at the walnut's voxel size over the medium box
+  (:meth:`~mi_displace.volume.field.DisplacedVolume.resample`), same sensor, lights,
+  integrator and spp (``grid_res``², ``grid_spp``), warm median of ``grid_repeats`` renders
+  alternating between the two: ``time_ratio`` = ours / grid (target <= 2), ``flip`` between
+  the two images (``flip_noise_floor``: between two of our renders, other seeds),
+  ``mean_ratio`` of their mean radiance, the grid's shape and bytes.
+
 ``--quick`` runs the same with :data:`QUICK` sizes (a 64^3 walnut, 128^2 frames, 2 warm
-renders each, the comparison at 32^2 with references capped at 16 spp).
+renders each, the comparison at 32^2 with references capped at 16 spp, the grid comparison
+at 32^2 and 4 spp).
 """
 from __future__ import annotations
 
@@ -55,16 +66,20 @@ REPEATS = 15
 class Sizes(NamedTuple):
     """What a run renders: the walnut resampled to ``voxels``^3, frames of ``size`` x
     ``size`` pixels, ``repeats`` warm renders of each, the comparison scene at ``flip_res``
-    x ``flip_res`` with references capped at ``flip_max_spp``."""
+    x ``flip_res`` with references capped at ``flip_max_spp``; the gridvolume comparison at
+    ``grid_res`` x ``grid_res``, ``grid_spp`` spp, ``grid_repeats`` warm renders each."""
     voxels: int
     size: int
     repeats: int
     flip_res: int
     flip_max_spp: int
+    grid_res: int = 128
+    grid_spp: int = 64
+    grid_repeats: int = 3
 
 
 FULL = Sizes(RES, SIZE, REPEATS, 96, 256)
-QUICK = Sizes(64, 128, 2, 32, 16)
+QUICK = Sizes(64, 128, 2, 32, 16, 32, 4, 1)
 
 #: Paper's Table 2 maps: (primitive, resolution); our D_k needs >= 2 nodes per axis.
 TABLE2 = [("peel", (128, 128, 2), 320), ("slabs", (128, 128, 2), 320),
@@ -147,6 +162,80 @@ def table2() -> list[dict]:
     return rows
 
 
+def displaced_volume_of(medium):
+    """The ``displaced_volume`` plugin that is ``medium``'s sigma_t (found among the objects
+    ``mi.traverse(medium)`` reaches: the one with a ``medium_box``), or a ValueError."""
+    found = [node for _, _, node, _ in mi.traverse(medium).properties.values() if hasattr(node, "medium_box")]
+    if not found:
+        raise ValueError("gridvolume comparison: the scene's medium has no displaced_volume sigma_t "
+                         "with editable maps")
+    return found[0]
+
+
+def grid_scene(scene, shape=None):
+    """``scene`` (one ``volume_proxy`` holding a ``heterogeneous`` medium whose sigma_t is a
+    ``displaced_volume``) with that medium's sigma_t replaced by a Mitsuba ``gridvolume``: the
+    volume resampled (:meth:`~mi_displace.volume.field.DisplacedVolume.resample`) on ``shape``
+    (nz, ny, nx) cells over the medium box (default: the object's voxel size), inside a
+    ``cube`` of that box; same sensor, lights, integrator, albedo, phase function and scale.
+
+    Returns:
+        (the grid scene, the grid's (nz, ny, nx) shape).
+    """
+    holder = next((s for s in scene.shapes() if s.interior_medium() is not None), None)
+    if holder is None:
+        raise ValueError("gridvolume comparison: the scene has no shape with an interior medium")
+    medium = holder.interior_medium()
+    plugin = displaced_volume_of(medium)
+    lo, hi = (np.asarray(b, float) for b in plugin.medium_box())
+    if shape is None:
+        shape = np.maximum(np.ceil((hi - lo) / plugin.volume.obj.voxel_size - 1e-6), 2).astype(int)[::-1]
+    data = plugin.volume.resample(lo, hi, shape)
+    params = mi.traverse(medium)
+    scene_dict = {
+        "type": "scene", "integrator": scene.integrator(), "sensor": scene.sensors()[0],
+        "box": {"type": "cube", "bsdf": {"type": "null"},
+                "to_world": mi.ScalarTransform4f().translate(mi.ScalarPoint3f((lo + hi) / 2))
+                .scale(mi.ScalarVector3f((hi - lo) / 2)),
+                "interior": {"type": "heterogeneous", "phase": medium.phase_function(),
+                             "scale": float(params["scale"]),
+                             "albedo": float(params["albedo.value.value"][0]),
+                             "sigma_t": {"type": "gridvolume", "data": mi.TensorXf(data[..., None]),
+                                         "to_world": mi.ScalarTransform4f().translate(mi.ScalarPoint3f(lo))
+                                         .scale(mi.ScalarVector3f(hi - lo))}}}}
+    scene_dict.update({f"emitter_{i}": e for i, e in enumerate(scene.emitters())})
+    return mi.load_dict(scene_dict), tuple(int(s) for s in shape)
+
+
+def gridvolume_comparison(sizes: Sizes = FULL) -> dict:
+    """The ``gridvolume`` part of the record (module docstring)."""
+    from mi_displace.evaluate.metrics import assert_finite, flip
+    from mi_displace.render.scene import load
+
+    scene, _ = load(SCENE, mode="reference", res=sizes.grid_res, spp=sizes.grid_spp)
+    start = time.perf_counter()
+    grid, shape = grid_scene(scene)
+    resample_s = time.perf_counter() - start
+    times, images = {"ours": [], "grid": []}, {"ours": [], "grid": []}
+    for repeat in range(sizes.grid_repeats + 1):   # the first of each is cold
+        for name, s in (("ours", scene), ("grid", grid)):
+            dr.sync_thread()
+            start = time.perf_counter()
+            image = mi.render(s, spp=sizes.grid_spp, seed=repeat)
+            dr.eval(image)
+            dr.sync_thread()
+            times[name].append(time.perf_counter() - start)
+            images[name].append(assert_finite(image, f"gridvolume comparison: {name}"))
+    ours, grid_s = (statistics.median(times[k][1:]) for k in ("ours", "grid"))
+    return {"resolution": [sizes.grid_res, sizes.grid_res], "spp": sizes.grid_spp,
+            "grid_shape": list(shape), "grid_bytes": int(np.prod(shape)) * 4, "resample_s": resample_s,
+            "reference_s": ours, "gridvolume_s": grid_s, "time_ratio": ours / grid_s,
+            "reference_cold_s": times["ours"][0], "gridvolume_cold_s": times["grid"][0],
+            "flip": flip(images["grid"][-1], images["ours"][-1])[0],
+            "flip_noise_floor": flip(images["ours"][0], images["ours"][-1])[0],
+            "mean_ratio": float(images["ours"][-1].mean() / images["grid"][-1].mean()), "target": 2.0}
+
+
 def run(sizes: Sizes = FULL, with_flip: bool = True) -> dict:
     from mi_displace.volume import slicer
     from mi_displace.volume.displacement import DisplacementChain, PlacedMap
@@ -182,6 +271,7 @@ def run(sizes: Sizes = FULL, with_flip: bool = True) -> dict:
         "vtk_reason": vtk_reason,
         "undisplaced_vs_vtk": (warm_u / vtk_s) if vtk_s else None,
         "table2": table2(),
+        "gridvolume": gridvolume_comparison(sizes),
         "targets": TARGETS,
         "variant": mi.variant(),
     }

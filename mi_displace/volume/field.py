@@ -101,6 +101,19 @@ class DisplacedVolume:
         """World bounding box of the displaced object (§4.2 proxy geometry)."""
         return self.chain.proxy_box(self.obj.bbox_min, self.obj.bbox_max)
 
+    def resample(self, lo, hi, shape) -> np.ndarray:
+        """sigma_t (world units⁻¹) at the cell centres of a grid of ``shape`` (nz, ny, nx)
+        cells over the world box [lo, hi] (3,): what a Mitsuba ``gridvolume`` whose
+        ``to_world`` maps the unit cube onto that box holds to show this volume (its
+        trilinear reconstruction of the field, not the field: cut faces and the α = 1/2
+        threshold blur over one cell).  Returns float32 (nz, ny, nx)."""
+        lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+        nz, ny, nx = (int(s) for s in shape)
+        axes = [lo[a] + (np.arange(n) + 0.5) * (hi[a] - lo[a]) / n for a, n in enumerate((nx, ny, nz))]
+        z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+        p = mi.Point3f(mi.Float(x.ravel()), mi.Float(y.ravel()), mi.Float(z.ravel()))
+        return np.asarray(self.sigma_t(p), dtype=np.float32).reshape(nz, ny, nx)
+
     def smooth_field(self, p: mi.Point3f, active=True) -> mi.Float:
         """τ(O(G(p'))) α_s(p'): the displaced field without the hard 1/2 threshold (for FD)."""
         r = self.chain.approximate(p, active=active) if self.mode == "approximation" else self.chain.exact(p)

@@ -70,3 +70,82 @@ def test_spread_puts_one_value_in_each_stratum_new_each_run():
         strata = np.floor((values - low) / (high - low) * count)
         np.testing.assert_array_equal(strata, np.arange(count))   # one per stratum, in order
     assert not np.intersect1d(first, second).size                 # another run, other values
+
+
+class _Gain:
+    """A value a frozen function cannot see change (neither an input nor in its closure)."""
+    k = 2.0
+
+
+def _scaled(x):
+    import drjit as dr
+    return x * _Gain.k + dr.sum(x)
+
+
+def test_freeze_lever_times_both_and_sees_a_baked_value(variant_llvm, monkeypatch):
+    """``freeze_lever``: frozen and plain frames timed, images equal when only the frozen
+    function's inputs change; a value baked into the recording (as Mitsuba's ``bumpmap``
+    scale) shows as unequal images; a refused recording gives Dr.Jit's reason."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from mi_displace.bench.frames import freeze_lever
+
+    state = {"x": dr.arange(mi.Float, 1000)}
+
+    def move():
+        state["x"] = dr.arange(mi.Float, 1000) * 0.5
+
+    def lever(changes, frozen=_scaled):
+        return freeze_lever(lambda: _scaled(state["x"]), dr.freeze(frozen), lambda f: f(state["x"]), changes, 3)
+
+    inputs = lever([move])
+    assert inputs["frozen_identical"] is True and inputs["frozen_error"] is None
+    assert inputs["frozen_frame_s"] > 0 and inputs["frozen_ratio"] > 0
+    monkeypatch.setattr(_Gain, "k", 2.0)
+    baked = lever([lambda: monkeypatch.setattr(_Gain, "k", 3.0)])
+    assert baked["frozen_identical"] is False
+    refused = lever([], frozen=lambda x: x * dr.sum(x)[0])   # a read-back inside
+    assert refused["frozen_frame_s"] is refused["frozen_ratio"] is refused["frozen_identical"] is None
+    assert "frozen function" in refused["frozen_error"]
+
+
+def test_fixed_cost_renders_a_tiny_film(variant_llvm):
+    """``fixed_cost`` sets the film to FIXED_RES² and times frames there."""
+    import mitsuba as mi
+
+    from mi_displace.bench import frames
+    from mi_displace.core.resources import scene_path
+    from mi_displace.render.scene import load
+
+    scene, _ = load(scene_path("vdm_torus.xml"), mode="bump", integrator="raster", res=16)
+    sensor = mi.traverse(scene.sensors()[0])
+    sizes = []
+
+    def frame():
+        image = mi.render(scene, integrator=mi.load_dict({"type": "raster", "aa": 1}), spp=1)
+        sizes.append(image.shape[:2])
+
+    record = frames.fixed_cost(sensor, frame, 3)
+    assert set(sizes) == {(frames.FIXED_RES, frames.FIXED_RES)} and len(sizes) == 5
+    assert record["fixed_frame_s"] > 0 and 0 <= record["fixed_kernel_share"] <= 1 and record["fixed_kernels"] >= 1
+
+
+def test_volume_slicer_row_draws_one_ray_a_pixel(variant_llvm):
+    """The volume slicer row renders at one ray a pixel (the scene's own ``aa`` is 2): the
+    same image as a slicer made with ``aa`` 1 and the scene's other settings."""
+    import mitsuba as mi
+
+    from mi_displace.bench import frames
+    from mi_displace.core.resources import scene_path
+    from mi_displace.render.scene import load
+
+    row = next(r for r in frames.ROWS if r.name == "volume_slicer")
+    scene, _ = load(scene_path(row.scene), **row.params, res=16)
+    plugin = scene.integrator().plugin
+    assert scene.integrator().settings.aa == 2
+    mine = mi.render(scene, integrator=frames.frame_integrator(row, scene), spp=1)
+    one = mi.load_dict({"type": "volume_slicer", "volume": plugin, "model": "scatter", "albedo": 0.8,
+                        "spacing": 1.0, "aa": 1})
+    assert np.isfinite(np.array(mine)).all()
+    np.testing.assert_array_equal(np.array(mine), np.array(mi.render(scene, integrator=one, spp=1)))
