@@ -18,11 +18,12 @@ from __future__ import annotations
 
 import time
 
+import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from mi_displace.core import surfaces
-from mi_displace.core.properties import REQUIRED, Param, PluginSpec
+from mi_displace.core.properties import REQUIRED, Param, PluginSpec, refuse_unknown
 from mi_displace.core.texture_height import check_texture_finite, warn_if_srgb
 from mi_displace.slicing.bsdf import SlicingBSDF
 from mi_displace.slicing.trace import ALPHA_TESTS
@@ -78,6 +79,7 @@ class Slicing(mi.Mesh):
 
     def __init__(self, props: mi.Properties, values: dict):
         start = time.perf_counter()
+        refuse_unknown(SPEC, props)   # a typo costs no slice build
         base_name = surfaces.base_name("slicing", values, "plane")
         height, scale, slices = values["height"], values["scale"], values["slices"]
         check_texture_finite(height)
@@ -138,6 +140,12 @@ class Slicing(mi.Mesh):
         cb.put("slices", self.slices, mi.ParamFlags.NonDifferentiable)
 
     def parameters_changed(self, keys=[]):
+        graded = [k for k in ("scale", "slices") if dr.grad_enabled(getattr(self, k))]
+        if graded:
+            raise ValueError(f"slicing: a gradient was enabled on {', '.join(map(repr, graded))}, "
+                             "which the slice build cannot differentiate (the slices are rebuilt "
+                             "from its value); differentiable: the nested material's parameters "
+                             "(bsdf.nested.*)")
         if "scale" not in keys and "slices" not in keys:
             return super().parameters_changed(keys)
         start = time.perf_counter()
