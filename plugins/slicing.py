@@ -17,6 +17,7 @@ the slice counts (what ``auto`` chose), triangles and bytes.
 from __future__ import annotations
 
 import time
+import warnings
 
 import drjit as dr
 import mitsuba as mi
@@ -29,7 +30,7 @@ from mi_displace.slicing.bsdf import SlicingBSDF
 from mi_displace.slicing.trace import ALPHA_TESTS
 from mi_displace.vdm.mesostructure import nested_objects
 from mi_displace.slicing import geometry as geo
-from mi_displace.slicing.sliced import DIRECTIONS, SlicedVolume
+from mi_displace.slicing.sliced import DIRECTIONS, SlicedVolume, crossing, crossing_message
 from mi_displace.plugins._guard import constructor
 
 SPEC = PluginSpec(
@@ -118,7 +119,22 @@ class Slicing(mi.Mesh):
         geo.fill_mesh(self, walls)
         self.volume, self.bsdf_ref = volume, bsdf
         self._settings = (direction, alpha, ratio_scaling, draw_base)
-        self.build_stats = {**volume.stats, "slices_auto": auto, "build_s": time.perf_counter() - start}
+        self._rays = None   # the thickness check's rays (mesh bases), cast once
+        self.build_stats = {**volume.stats, "slices_auto": auto, **self._thickness(),
+                            "build_s": time.perf_counter() - start}
+
+    def _thickness(self) -> dict:
+        """On a mesh base, the thickness check of ``displaced`` for the slices
+        (:func:`mi_displace.slicing.sliced.crossing`): warns naming ``scale`` where one part's
+        displacement volume reaches another part of the base."""
+        v = self.volume
+        if v.bm.base is not None:
+            return {}
+        check, self._rays = crossing(v.bm, v.height, v.scale, self._rays)
+        message = crossing_message(f"slicing {self.id() or '(no id)'!r}", check)
+        if message:
+            warnings.warn(message, stacklevel=3)
+        return {"crossing_vertices": check["crossing_vertices"]}
 
     def raster_begin(self, sensor: mi.Sensor, aa: int) -> None:
         """Called by the ``raster`` integrator before it draws a frame: rasterise the
@@ -157,7 +173,8 @@ class Slicing(mi.Mesh):
         geo.fill_mesh(self, volume.walls)   # same topology: only the walls' heights move
         self.volume = self.bsdf_ref.model = volume
         self.bsdf_ref._cache = None
-        self.build_stats = {**volume.stats, "slices_auto": False, "build_s": time.perf_counter() - start}
+        self.build_stats = {**volume.stats, "slices_auto": False, **self._thickness(),
+                            "build_s": time.perf_counter() - start}
 
     def to_string(self):
         return f"Slicing[{self.build_stats}]"

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from mi_displace.core.texture_height import height_function
 from mi_displace.slicing import geometry as geo
@@ -263,3 +264,49 @@ class SlicedVolume:
         origin = hit.p + normal * bias + wl * leave
         choice = self.choose(wl, hit.n, hit.su, hit.sv)
         return self.find(origin, wl, choice, active).found
+
+
+def crossing(bm: geo.BaseMesh, height: mi.Texture, scale: float, rays=None):
+    """The thickness check of ``displaced`` (:func:`mi_displace.core.thickness.crossing_check`)
+    for the slices of a mesh base: from each base vertex, the fragments reach
+    ``scale D(uv)`` along the extrusion; a part of the base met closer than that along the
+    same ray (a two-walled model whose walls both face outwards, a fold) lies inside the
+    other part's displacement volume, whose slices then hide it.
+
+    Args:
+        bm: a mesh base (world space); height: the α texture; scale: object units.
+        rays: the :class:`mi_displace.core.thickness.CrossingRays` of an earlier call on the
+            same ``bm`` (cast here when ``None``; they depend on the base only).
+
+    Returns:
+        ``(check, rays)``: the check's dict (crossing_vertices, vertices, max_depth_ratio)
+        and the rays, for the next call after a ``scale`` edit.
+    """
+    from mi_displace.core import thickness
+    from mi_displace.core.tessellate import Tessellation
+
+    length = np.linalg.norm(bm.extrude, axis=1)
+    unit = bm.extrude / np.maximum(length, 1e-30)[:, None]
+    to_pt = lambda a: mi.Point3f(*(mi.Float(np.ascontiguousarray(a[:, k], np.float32)) for k in range(3)))
+    uv = mi.Point2f(*(mi.Float(np.ascontiguousarray(bm.uvs[:, k], np.float32)) for k in range(2)))
+    si = dr.zeros(mi.SurfaceInteraction3f, len(length))
+    si.uv = uv
+    D = dr.clip(height.eval_1(si), 0.0, 1.0)
+    t = Tessellation(to_pt(bm.positions), mi.Vector3f(to_pt(unit)), uv,
+                     mi.Vector3u(*(mi.UInt32(np.ascontiguousarray(bm.faces[:, k], np.uint32))
+                                   for k in range(3))),
+                     to_pt(bm.positions), mi.Vector3f(to_pt(unit)),
+                     scale * mi.Float(length.astype(np.float32)) * D)
+    base_mesh = (bm.positions, bm.faces, bm.uvs)
+    rays = thickness.cast_crossing_rays(t, base_mesh) if rays is None else rays
+    return thickness.crossing_check(t, base_mesh=base_mesh, rays=rays), rays
+
+
+def crossing_message(owner: str, check: dict) -> str | None:
+    """The user's warning for :func:`crossing`'s check, or ``None`` when clean."""
+    if not check["crossing_vertices"]:
+        return None
+    return (f"{owner}: the displacement volume reaches through another part of the base at "
+            f"{check['crossing_vertices']:,} of {check['vertices']:,} base vertices (up to "
+            f"{check['max_depth_ratio']:.2f}x the distance to it): that part's slices hide "
+            "this one's relief; lower 'scale' (or orient the base's faces outwards)")
