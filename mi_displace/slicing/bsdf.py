@@ -58,7 +58,7 @@ class SlicingBSDF(MesostructureBSDF):
         third = dr.full(mi.Float, 1 / 3, dr.width(si.t))   # the proxy face's centre (faces
         bn, su, sv = self.model.walls_scene.frame(si.prim_index, (third, third), active)  # = walls)
         choice = self.model.choose(d, dr.normalize(bn), su, sv)
-        hit = self.model.find_view(origin, d, choice, active)
+        hit = self.model.find_view(origin, d, choice, active, si.t)
         normal = self.model.normal(hit)
         # shaded from the side the ray arrives on: the gradient normal faces away from the
         # viewer where the slices show a fragment the true surface hides (grazing views,
