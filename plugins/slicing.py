@@ -56,7 +56,9 @@ SPEC = PluginSpec(
         Param("alpha", "string", None, "α-test (default: basic for direction a, else ramp)",
               choices=ALPHA_TESTS),
         Param("ratio_scaling", "bool", True, "§3.4 orthogonal slice-count scaling"),
-        Param("draw_base", "bool", False, "also draw the base polygons (opaque)"),
+        Param("draw_base", "bool", None, "also draw the base polygons (opaque); default: true "
+              "on a closed base (sphere, torus, a watertight mesh: the base is a solid, and "
+              "the ramp test's cut-outs would open it), false on an open one"),
         Param("rasterise", "bool", True, "under `raster`: z-buffer the slices (false: walk them)"),
         Param("self_shadows", "bool", True, "walk the slices towards the light"),
     ),
@@ -97,6 +99,8 @@ class Slicing(mi.Mesh):
         params = surfaces.base_params("slicing", base_name, values)
         to_world = np.array(props.get("to_world", mi.ScalarTransform4f()).matrix, np.float64)
         bm = geo.make_base_mesh(base_name, params, values["filename"], resolution, to_world)
+        if draw_base is None:
+            draw_base = len(geo.boundary_edges(bm)) == 0
         auto = slices == "auto"
         if auto:
             slices = geo.auto_slices(sensor, bm.bbox(scale), bm.world_scale(scale))
