@@ -11,7 +11,8 @@ gradient normal used as it is)."""
 import mitsuba as mi
 import numpy as np
 
-MAT = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.5, 0.4]}}
+from conftest import bricks_torus
+
 SPP = 32
 
 
@@ -31,10 +32,7 @@ def render(shape, res=48):
 
 
 def test_screen_slicing_has_no_black_pixel_where_the_true_geometry_is_lit(variant):
-    bricks = {"type": "bricks", "rows": 4, "columns": 2, "mortar": 0.15, "bevel": 0.2,
-              "to_uv": mi.ScalarTransform4f().scale([4, 2, 1])}
-    torus = {"base": "torus", "major_radius": 1.0, "minor_radius": 0.4, "scale": 0.1,
-             "height": bricks, "bsdf": MAT}
+    torus = bricks_torus()
     ref = render({"type": "displaced", **torus, "resolution": 256})
     img = render({"type": "slicing", **torus, "resolution": 16, "slices": 8,
                   "direction": "screen", "draw_base": True})

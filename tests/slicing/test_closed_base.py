@@ -7,6 +7,8 @@ whose basic test draws zero heights; the same under `raster` and `path`)."""
 import mitsuba as mi
 import numpy as np
 
+from conftest import bricks_torus
+
 
 def render(obj, integrator, spp):
     d = mi.cornell_box()
@@ -22,11 +24,7 @@ def render(obj, integrator, spp):
 
 
 def test_closed_base_has_no_see_through_under_the_ramp_test(variant):
-    bricks = {"type": "bricks", "rows": 4, "columns": 2, "mortar": 0.15, "bevel": 0.2,
-              "to_uv": mi.ScalarTransform4f().scale([4, 2, 1])}
-    torus = {"base": "torus", "major_radius": 1.0, "minor_radius": 0.4, "scale": 0.1,
-             "height": bricks, "to_world": mi.ScalarTransform4f().scale(0.4),
-             "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.5, 0.4]}}}
+    torus = bricks_torus(to_world=mi.ScalarTransform4f().scale(0.4))
     truth = render({"type": "displaced", **torus, "resolution": 256},
                    {"type": "path", "max_depth": 2}, 64)
     dark = truth < 0.002
