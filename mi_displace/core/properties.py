@@ -206,7 +206,13 @@ class PluginSpec:
         return out
 
 
-def refuse_unknown(spec: PluginSpec, props: mi.Properties, also: tuple[str, ...] = ("to_world",)) -> None:
+#: Properties Mitsuba 3.9.1's ``Shape`` / ``Mesh`` constructors read themselves (a shape
+#: plugin deriving from ``mi.Mesh`` accepts them without declaring them).
+MESH_BASE_PROPERTIES = ("to_world", "silhouette_sampling_weight", "face_normals", "flip_normals")
+
+
+def refuse_unknown(spec: PluginSpec, props: mi.Properties,
+                   also: tuple[str, ...] = MESH_BASE_PROPERTIES) -> None:
     """Raise a one-line ``ValueError`` naming the first property of ``props`` that ``spec``
     does not declare (nor ``also``, the Mitsuba base class's own; nested objects pass), with
     the closest declared name.  For plugins whose build is long: Mitsuba's own
