@@ -18,7 +18,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.core.mesh_io import resolve_path
-from mi_displace.core.properties import Param, PluginSpec
+from mi_displace.core.properties import Param, PluginSpec, refuse_unknown
 from mi_displace.slicing.bsdf import DepthObjectBSDF, ViewColour
 from mi_displace.slicing.geometry import MAX_SLICES
 from mi_displace.vdm.mesostructure import nested_objects
@@ -75,6 +75,7 @@ class DepthObjectShape(mi.Mesh):
     def __init__(self, props: mi.Properties, values: dict):
         start = time.perf_counter()
         name = "visual_hull" if self.HULL else "depth_object"
+        refuse_unknown(HULL_SPEC if self.HULL else SPEC, props)   # before the capture
         slices, source = values["slices"], values["source"]
         if values["filename"] is not None:
             images = dobj.read(resolve_path(values["filename"]))

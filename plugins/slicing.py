@@ -17,18 +17,20 @@ the slice counts (what ``auto`` chose), triangles and bytes.
 from __future__ import annotations
 
 import time
+import warnings
 
+import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from mi_displace.core import surfaces
-from mi_displace.core.properties import REQUIRED, Param, PluginSpec
+from mi_displace.core.properties import REQUIRED, Param, PluginSpec, refuse_unknown
 from mi_displace.core.texture_height import check_texture_finite, warn_if_srgb
 from mi_displace.slicing.bsdf import SlicingBSDF
 from mi_displace.slicing.trace import ALPHA_TESTS
 from mi_displace.vdm.mesostructure import nested_objects
 from mi_displace.slicing import geometry as geo
-from mi_displace.slicing.sliced import DIRECTIONS, SlicedVolume
+from mi_displace.slicing.sliced import DIRECTIONS, SlicedVolume, crossing, crossing_message
 from mi_displace.plugins._guard import constructor
 
 SPEC = PluginSpec(
@@ -54,7 +56,9 @@ SPEC = PluginSpec(
         Param("alpha", "string", None, "α-test (default: basic for direction a, else ramp)",
               choices=ALPHA_TESTS),
         Param("ratio_scaling", "bool", True, "§3.4 orthogonal slice-count scaling"),
-        Param("draw_base", "bool", False, "also draw the base polygons (opaque)"),
+        Param("draw_base", "bool", None, "also draw the base polygons (opaque); default: true "
+              "on a closed base (sphere, torus, a watertight mesh: the base is a solid, and "
+              "the ramp test's cut-outs would open it), false on an open one"),
         Param("rasterise", "bool", True, "under `raster`: z-buffer the slices (false: walk them)"),
         Param("self_shadows", "bool", True, "walk the slices towards the light"),
     ),
@@ -78,6 +82,7 @@ class Slicing(mi.Mesh):
 
     def __init__(self, props: mi.Properties, values: dict):
         start = time.perf_counter()
+        refuse_unknown(SPEC, props)   # a typo costs no slice build
         base_name = surfaces.base_name("slicing", values, "plane")
         height, scale, slices = values["height"], values["scale"], values["slices"]
         check_texture_finite(height)
@@ -94,6 +99,8 @@ class Slicing(mi.Mesh):
         params = surfaces.base_params("slicing", base_name, values)
         to_world = np.array(props.get("to_world", mi.ScalarTransform4f()).matrix, np.float64)
         bm = geo.make_base_mesh(base_name, params, values["filename"], resolution, to_world)
+        if draw_base is None:
+            draw_base = len(geo.boundary_edges(bm)) == 0
         auto = slices == "auto"
         if auto:
             slices = geo.auto_slices(sensor, bm.bbox(scale), bm.world_scale(scale))
@@ -116,7 +123,22 @@ class Slicing(mi.Mesh):
         geo.fill_mesh(self, walls)
         self.volume, self.bsdf_ref = volume, bsdf
         self._settings = (direction, alpha, ratio_scaling, draw_base)
-        self.build_stats = {**volume.stats, "slices_auto": auto, "build_s": time.perf_counter() - start}
+        self._rays = None   # the thickness check's rays (mesh bases), cast once
+        self.build_stats = {**volume.stats, "slices_auto": auto, **self._thickness(),
+                            "build_s": time.perf_counter() - start}
+
+    def _thickness(self) -> dict:
+        """On a mesh base, the thickness check of ``displaced`` for the slices
+        (:func:`mi_displace.slicing.sliced.crossing`): warns naming ``scale`` where one part's
+        displacement volume reaches another part of the base."""
+        v = self.volume
+        if v.bm.base is not None:
+            return {}
+        check, self._rays = crossing(v.bm, v.height, v.scale, self._rays)
+        message = crossing_message(f"slicing {self.id() or '(no id)'!r}", check)
+        if message:
+            warnings.warn(message, stacklevel=3)
+        return {"crossing_vertices": check["crossing_vertices"]}
 
     def raster_begin(self, sensor: mi.Sensor, aa: int) -> None:
         """Called by the ``raster`` integrator before it draws a frame: rasterise the
@@ -138,6 +160,12 @@ class Slicing(mi.Mesh):
         cb.put("slices", self.slices, mi.ParamFlags.NonDifferentiable)
 
     def parameters_changed(self, keys=[]):
+        graded = [k for k in ("scale", "slices") if dr.grad_enabled(getattr(self, k))]
+        if graded:
+            raise ValueError(f"slicing: a gradient was enabled on {', '.join(map(repr, graded))}, "
+                             "which the slice build cannot differentiate (the slices are rebuilt "
+                             "from its value); differentiable: the nested material's parameters "
+                             "(bsdf.nested.*)")
         if "scale" not in keys and "slices" not in keys:
             return super().parameters_changed(keys)
         start = time.perf_counter()
@@ -149,7 +177,8 @@ class Slicing(mi.Mesh):
         geo.fill_mesh(self, volume.walls)   # same topology: only the walls' heights move
         self.volume = self.bsdf_ref.model = volume
         self.bsdf_ref._cache = None
-        self.build_stats = {**volume.stats, "slices_auto": False, "build_s": time.perf_counter() - start}
+        self.build_stats = {**volume.stats, "slices_auto": False, **self._thickness(),
+                            "build_s": time.perf_counter() - start}
 
     def to_string(self):
         return f"Slicing[{self.build_stats}]"

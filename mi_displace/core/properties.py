@@ -204,3 +204,28 @@ class PluginSpec:
             else:
                 out[p.name] = p.default
         return out
+
+
+#: Properties Mitsuba 3.9.1's ``Shape`` / ``Mesh`` constructors read themselves (a shape
+#: plugin deriving from ``mi.Mesh`` accepts them without declaring them).
+MESH_BASE_PROPERTIES = ("to_world", "silhouette_sampling_weight", "face_normals", "flip_normals")
+
+
+def refuse_unknown(spec: PluginSpec, props: mi.Properties,
+                   also: tuple[str, ...] = MESH_BASE_PROPERTIES) -> None:
+    """Raise a one-line ``ValueError`` naming the first property of ``props`` that ``spec``
+    does not declare (nor ``also``, the Mitsuba base class's own; nested objects pass), with
+    the closest declared name.  For plugins whose build is long: Mitsuba's own
+    "unreferenced property" check runs only after the constructor returns."""
+    import difflib
+
+    names = {p.name for p in spec.all_params()} | set(also)
+    patterns = [p.pattern() for p in spec.all_params() if p.pattern() is not None]
+    for key in props.keys():
+        if key in names or props.type(key) == mi.Properties.Type.Object:
+            continue
+        if any(pattern.fullmatch(key) for pattern in patterns):
+            continue
+        close = difflib.get_close_matches(key, sorted(names), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ValueError(f"{spec.plugin}: unknown parameter {key!r}{hint}")

@@ -58,17 +58,24 @@ class SlicingBSDF(MesostructureBSDF):
         third = dr.full(mi.Float, 1 / 3, dr.width(si.t))   # the proxy face's centre (faces
         bn, su, sv = self.model.walls_scene.frame(si.prim_index, (third, third), active)  # = walls)
         choice = self.model.choose(d, dr.normalize(bn), su, sv)
-        hit = self.model.find_view(origin, d, choice, active)
+        hit = self.model.find_view(origin, d, choice, active, si.t)
         normal = self.model.normal(hit)
+        # shaded from the side the ray arrives on: the gradient normal faces away from the
+        # viewer where the slices show a fragment the true surface hides (grazing views,
+        # screen planes) or where the ray reached a fragment's far side (through a groove
+        # whose zero heights the ramp test masks out); there the self-shadow ray starts
+        # back along the ray, in the free space it came through
+        back = dr.dot(normal, wi) < 0
+        normal = dr.select(back, -normal, normal)
         si2 = shading_interaction(si, hit.uv, normal, hit.su)
         si2.p = hit.p
-        return (hit, normal), active & ~hit.found, si2
+        return (hit, normal, dr.select(back, wi, normal)), active & ~hit.found, si2
 
     def _lit(self, state, wo_world, active):
-        hit, normal = state
+        hit, normal, offset = state
         if not self.self_shadows:
             return dr.full(mi.Bool, True, dr.width(wo_world))
-        return ~self.model.occluded(hit, normal, wo_world,
+        return ~self.model.occluded(hit, offset, wo_world,
                                     active & hit.found & (dr.dot(normal, wo_world) > 0))
 
     def to_string(self):

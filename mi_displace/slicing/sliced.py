@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from mi_displace.core.texture_height import height_function
 from mi_displace.slicing import geometry as geo
@@ -159,9 +160,12 @@ class SlicedVolume:
         best_cos = dr.maximum(cos[0], cos[1])
         return mi.UInt32(dr.select(cos[2] > best_cos, 2, best))
 
-    def find(self, origin: mi.Point3f, d: mi.Vector3f, choice: mi.UInt32, active: mi.Bool):
+    def find(self, origin: mi.Point3f, d: mi.Vector3f, choice: mi.UInt32, active: mi.Bool,
+             t_floor: mi.Float | None = None):
         """Front-most passing fragment along ``origin + t d`` (t >= 0) inside the first
-        stretch of displacement volume the ray meets (up to the wall it leaves through).
+        stretch of displacement volume the ray meets (up to the wall it leaves through);
+        with ``t_floor`` (the distance of the proxy wall walked for), the first stretch
+        not left before it (:func:`~mi_displace.slicing.trace.first_passing_slice`).
 
         Returns:
             :class:`Hit` (``found`` False where every slice failed the test).
@@ -169,7 +173,7 @@ class SlicedVolume:
         n = dr.width(origin)
         active = mi.Bool(active)
         if self.direction == "screen":
-            return self._find_screen(origin, d, active)
+            return self._find_screen(origin, d, active, t_floor)
         found = dr.zeros(mi.Bool, n)
         hit = Hit(found, mi.Point3f(origin), dr.zeros(mi.Point2f, n), dr.zeros(mi.Vector3f, n),
                   dr.zeros(mi.Vector3f, n), dr.zeros(mi.Vector3f, n))
@@ -177,7 +181,7 @@ class SlicedVolume:
             slices, max_iter = self.families[fam]
             mine = active & (choice == index)
             ok, t, prim, bary, *_ = first_passing_slice(slices, origin, d, self._test, mine,
-                                                        max_iter, self.opaque_base)
+                                                        max_iter, self.opaque_base, t_floor)
             idx = slices.corners(prim, ok)
             uv = mi.Point2f(*slices.lerp(slices.uv, 2, idx, bary, ok))
             bn, su, sv = slices.frame(prim, bary, ok)
@@ -190,26 +194,27 @@ class SlicedVolume:
         return hit
 
     def find_view(self, origin: mi.Point3f, d: mi.Vector3f, choice: mi.UInt32,
-                  active: mi.Bool) -> Hit:
-        """:meth:`find` for rays that may be the current frame's sample rays: those take
-        their fragment from the rasterised slices (:attr:`frame`, set by the raster
-        integrator), the others walk."""
+                  active: mi.Bool, t_floor: mi.Float) -> Hit:
+        """:meth:`find` (from the proxy wall at ``t_floor``) for rays that may be the
+        current frame's sample rays: those take their fragment from the rasterised slices
+        (:attr:`frame`, set by the raster integrator), the others walk."""
         if self.frame is None:
-            return self.find(origin, d, choice, active)
+            return self.find(origin, d, choice, active, t_floor)
         use, drawn = self.frame.lookup(origin, d, active)
         walk = mi.Bool(active) & ~use
         # under a symbolic if: a SIMD packet of frame samples only jumps over the walk
-        walked = dr.if_stmt((origin, d, choice, walk), walk,
-                            lambda o, w, c, m: self.find(o, w, c, m).fields(),
-                            lambda o, w, c, m: drawn.fields(), label="slicing_walk")
+        walked = dr.if_stmt((origin, d, choice, walk, t_floor), walk,
+                            lambda o, w, c, m, f: self.find(o, w, c, m, f).fields(),
+                            lambda o, w, c, m, f: drawn.fields(), label="slicing_walk")
         return drawn.select(use, Hit(*walked))
 
-    def _find_screen(self, origin, d, active):
+    def _find_screen(self, origin, d, active, t_floor=None):
         """§3.3: planes perpendicular to the ray, p . d = k delta, clipped to the volume (the
         base's exact coordinates).  Made in object space (p, d, delta = scale / N there), so
         that ``to_world`` moves them with the surface; the ray parameter t is shared."""
         never = lambda uv, h: dr.zeros(mi.Bool, dr.width(h))
-        *_, t_in, t_out, bottom = first_passing_slice(self.walls_scene, origin, d, never, active, 64)
+        *_, t_in, t_out, bottom = first_passing_slice(self.walls_scene, origin, d, never, active, 64,
+                                                      t_floor=t_floor)
         t_out = dr.select(dr.isinf(t_out), t_in, t_out)
         base = self.bm.base
         o_obj, d_obj = self.to_object @ mi.Point3f(origin), self.to_object @ mi.Vector3f(d)
@@ -263,3 +268,49 @@ class SlicedVolume:
         origin = hit.p + normal * bias + wl * leave
         choice = self.choose(wl, hit.n, hit.su, hit.sv)
         return self.find(origin, wl, choice, active).found
+
+
+def crossing(bm: geo.BaseMesh, height: mi.Texture, scale: float, rays=None):
+    """The thickness check of ``displaced`` (:func:`mi_displace.core.thickness.crossing_check`)
+    for the slices of a mesh base: from each base vertex, the fragments reach
+    ``scale D(uv)`` along the extrusion; a part of the base met closer than that along the
+    same ray (a two-walled model whose walls both face outwards, a fold) lies inside the
+    other part's displacement volume, whose slices then hide it.
+
+    Args:
+        bm: a mesh base (world space); height: the α texture; scale: object units.
+        rays: the :class:`mi_displace.core.thickness.CrossingRays` of an earlier call on the
+            same ``bm`` (cast here when ``None``; they depend on the base only).
+
+    Returns:
+        ``(check, rays)``: the check's dict (crossing_vertices, vertices, max_depth_ratio)
+        and the rays, for the next call after a ``scale`` edit.
+    """
+    from mi_displace.core import thickness
+    from mi_displace.core.tessellate import Tessellation
+
+    length = np.linalg.norm(bm.extrude, axis=1)
+    unit = bm.extrude / np.maximum(length, 1e-30)[:, None]
+    to_pt = lambda a: mi.Point3f(*(mi.Float(np.ascontiguousarray(a[:, k], np.float32)) for k in range(3)))
+    uv = mi.Point2f(*(mi.Float(np.ascontiguousarray(bm.uvs[:, k], np.float32)) for k in range(2)))
+    si = dr.zeros(mi.SurfaceInteraction3f, len(length))
+    si.uv = uv
+    D = dr.clip(height.eval_1(si), 0.0, 1.0)
+    t = Tessellation(to_pt(bm.positions), mi.Vector3f(to_pt(unit)), uv,
+                     mi.Vector3u(*(mi.UInt32(np.ascontiguousarray(bm.faces[:, k], np.uint32))
+                                   for k in range(3))),
+                     to_pt(bm.positions), mi.Vector3f(to_pt(unit)),
+                     scale * mi.Float(length.astype(np.float32)) * D)
+    base_mesh = (bm.positions, bm.faces, bm.uvs)
+    rays = thickness.cast_crossing_rays(t, base_mesh) if rays is None else rays
+    return thickness.crossing_check(t, base_mesh=base_mesh, rays=rays), rays
+
+
+def crossing_message(owner: str, check: dict) -> str | None:
+    """The user's warning for :func:`crossing`'s check, or ``None`` when clean."""
+    if not check["crossing_vertices"]:
+        return None
+    return (f"{owner}: the displacement volume reaches through another part of the base at "
+            f"{check['crossing_vertices']:,} of {check['vertices']:,} base vertices (up to "
+            f"{check['max_depth_ratio']:.2f}x the distance to it): that part's slices hide "
+            "this one's relief; lower 'scale' (or orient the base's faces outwards)")

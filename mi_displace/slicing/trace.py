@@ -50,7 +50,8 @@ def alpha_test(kind: str, D: mi.Float, h_alpha: mi.Float) -> mi.Bool:
 
 def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
                         test: Callable[[mi.Point2f, mi.Float], mi.Bool],
-                        active: mi.Bool, max_iter: int | mi.UInt32, opaque_base: bool = False):
+                        active: mi.Bool, max_iter: int | mi.UInt32, opaque_base: bool = False,
+                        t_floor: mi.Float | None = None):
     """Walk the slice polygons of ``slices`` (a :class:`mi_displace.slicing.geometry.SliceScene`)
     from ``origin`` along unit ``d``.
 
@@ -58,6 +59,12 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
     passing slice fragment, at the first wall the ray leaves through, at a miss, or after
     ``max_iter`` polygons.  With ``opaque_base`` the bottom wall (the base surface) is a
     passing fragment when the ray leaves through it (the base polygons drawn as well).
+
+    ``t_floor`` (optional, per ray): the distance of the surface the walk is made for (a
+    proxy wall the ray reached after passing others); stretches of volume the ray leaves
+    before it are passed over, as a chain of pass-throughs left them behind.  A ray
+    spawned at the last wall meets no such stretch; a ray from the camera (the z-buffer's
+    depth peeling) does.
 
     Args:
         test: ``test(uv, h_alpha) -> Bool``, the α-test of a slice fragment.
@@ -84,14 +91,19 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
         entering = valid & wall & ~leaving
         t = t_acc + pi.t
         p = origin + t * d
+        early = dr.zeros(mi.Bool, dr.width(t))
+        if t_floor is not None:   # before the surface walked for: left behind
+            early = valid & (t < t_floor - step_past(p, fn, d, slices.length))
+            leaving &= ~early
         t_enter = dr.select(entering & (t_enter == dr.inf) & (t_exit == dr.inf), t, t_enter)
+        t_enter = dr.select(early & wall & ~entering, dr.inf, t_enter)
         t_exit = dr.select(leaving, t, t_exit)
         bottom = leaving & ((flags & 2) != 0)
         idx = slices.corners(face, valid)
         bary = (pi.prim_uv.x, pi.prim_uv.y)
         uv = mi.Point2f(*slices.lerp(slices.uv, 2, idx, bary, valid))
         ramp = slices.lerp(slices.ramp, 1, idx, bary, valid)[0]
-        passes = valid & ~wall & test(uv, ramp)
+        passes = valid & ~wall & ~early & test(uv, ramp)
         if opaque_base:
             passes |= bottom
         t_hit = dr.select(passes, t, t_hit)

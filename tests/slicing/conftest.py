@@ -42,6 +42,14 @@ def plane(kind="slicing", height=None, scale=0.2, **kw):
     return d
 
 
+def bricks_torus(**kw):
+    """Common keywords of a bricks torus (``slicing`` or ``displaced``; add ``type``)."""
+    bricks = {"type": "bricks", "rows": 4, "columns": 2, "mortar": 0.15, "bevel": 0.2,
+              "to_uv": mi.ScalarTransform4f().scale([4, 2, 1])}
+    return {"base": "torus", "major_radius": 1.0, "minor_radius": 0.4, "scale": 0.1,
+            "height": bricks, "bsdf": MATERIAL, **kw}
+
+
 @pytest.fixture
 def helpers():
     import types
