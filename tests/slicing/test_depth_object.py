@@ -15,8 +15,9 @@ SPHERE = {"type": "sphere", "radius": R, "center": S0.tolist(),
 
 
 @pytest.fixture
-def sphere_images(variant):
-    return dobj.capture(SPHERE, 96, center=[0, 0, 0], half=1.0)
+def sphere_images(variant, built_once):
+    """SPHERE captured at 96 x 96 in the cube [-1, 1]^3, once per run (read only)."""
+    return built_once("sphere_images", lambda: dobj.capture(SPHERE, 96, center=[0, 0, 0], half=1.0))
 
 
 def test_capture_is_the_analytic_sphere_depth(sphere_images):
