@@ -100,7 +100,6 @@ edges_ddm="tests/ddm/test_ddm_tiles.py::test_stadium_is_a_closed_curve_of_evenly
   tests/ddm/test_ddm_layout.py::test_one_cell_layout_and_one_entry_pattern \
   tests/ddm/test_ddm_layout.py::test_hex_rows_alternate_their_shift_and_gaps_shrink_hexagons \
   tests/ddm/test_ddm_layout.py::test_layout_messages_and_the_default_seed \
-  tests/ddm/test_ddm_mapping.py::test_config_defaults_are_the_documented_ones \
   tests/ddm/test_ddm_mapping.py::test_model_size_check_for_one_column_and_no_refit_without_auto \
   tests/ddm/test_ddm_mapping.py::test_model_w_max_rule_and_memory_ratio \
   tests/ddm/test_ddm_mapping.py::test_model_stats_clamped_mask_and_fold_message \
