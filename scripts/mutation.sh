@@ -41,13 +41,116 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# The edge-case tests of each package (written to kill mutants that survived the rest of its
+# tests), in the test modules of their subjects; every module of the package runs them (a
+# test named both whole and by its file runs once).
+edges_core="tests/ddm/test_ddm_bezier.py::test_teapot_derivatives_along_v_match_finite_differences \
+  tests/ddm/test_ddm_bezier.py::test_teapot_extent_is_the_longest_isoparametric_curve \
+  tests/ddm/test_ddm_bezier.py::test_teapot_curvature_bounds_are_the_extremes_on_a_finer_grid \
+  tests/core/test_thickness.py::test_crossing_check_without_displacement_or_vertices \
+  tests/core/test_thickness.py::test_displacement_of_exactly_the_thickness_reaches_but_does_not_cross \
+  tests/core/test_thickness.py::test_outward_rays_use_their_own_facing \
+  tests/core/test_thickness.py::test_crossing_rays_report_the_uv_of_what_they_hit \
+  tests/core/test_tessellate.py::test_group_mean_of_scalars_and_vectors \
+  tests/core/test_tessellate.py::test_vertex_frames_weight_the_triangles_by_area \
+  tests/core/test_tessellate.py::test_zero_vertex_normals_fall_back_to_the_tangent_frame"
+edges_slicing="tests/slicing/test_slicing.py::test_a_plane_base_is_boxed_by_twelve_wall_triangles \
+  tests/slicing/test_slicing.py::test_base_coordinates_invert_the_parametrisation \
+  tests/slicing/test_slicing.py::test_base_tangents_are_dS_du_and_dS_dv \
+  tests/slicing/test_slicing.py::test_projected_size_through_a_thin_lens_is_the_pinhole_one \
+  tests/slicing/test_depth_object.py::test_skip_leaves_an_empty_cell_a_hair_before_its_far_face \
+  tests/slicing/test_depth_object.py::test_images_of_different_sizes_are_named_in_the_message \
+  tests/slicing/test_depth_object.py::test_default_cube_holds_the_object_with_its_margin \
+  tests/slicing/test_depth_object.py::test_without_normal_images_the_best_facing_cube_face_is_the_normal"
+edges_volume="tests/volume/test_volume_maps.py::test_the_support_box_holds_every_displacement \
+  tests/volume/test_volume_maps.py::test_peel_is_continuous_across_the_cut_plane_beyond_the_hinge \
+  tests/volume/test_volume_maps.py::test_placement_messages_name_the_parameter_whole \
+  tests/volume/test_volume_maps.py::test_texture_bytes_count_the_non_zero_channels \
+  tests/volume/test_volume_maps.py::test_jacobian_of_an_obliquely_placed_map_matches_finite_differences \
+  tests/volume/test_volume_maps.py::test_peel_skips_its_undisplaced_cells \
+  tests/volume/test_volume_maps.py::test_world_box_of_an_uneven_box \
+  tests/volume/test_volume_maps.py::test_alpha_gradient_texture_matches_finite_differences \
+  tests/volume/test_volume_maps.py::test_jacobian_along_every_local_axis_of_the_seam \
+  tests/volume/test_volume_maps.py::test_set_moves_the_map_and_the_proxy_holds_matter_moved_down \
+  tests/volume/test_volume_maps.py::test_precomputed_composition_reads_one_composite_d_k \
+  tests/volume/test_volume_maps.py::test_sampled_map_resolution_error_names_the_d_k \
+  tests/volume/test_volume_maps.py::test_placement_vector_to_world_is_the_linear_part \
+  tests/volume/test_volume_maps.py::test_changed_rebuilds_the_precomputed_composite \
+  tests/volume/test_volume_normals.py::test_where_the_field_is_flat_every_normal_is_the_fallback \
+  tests/volume/test_volume_normals.py::test_a_lookup_without_the_alpha_gradient_gives_the_same_blend_normals \
+  tests/volume/test_volume_normals.py::test_blend_is_eq_7_between_the_jacobian_and_the_cut_normal \
+  tests/volume/test_volume_render.py::test_majorant_is_the_tight_bound_of_sigma_t \
+  tests/volume/test_volume_render.py::test_parameter_edges_and_messages"
+edges_ddm="tests/ddm/test_ddm_tiles.py::test_stadium_is_a_closed_curve_of_evenly_spaced_distinct_points \
+  tests/ddm/test_ddm_tiles.py::test_chain_links_have_their_stated_sizes \
+  tests/ddm/test_ddm_tiles.py::test_plate_is_an_n_by_n_grid_over_the_unit_square \
+  tests/ddm/test_ddm_tiles.py::test_hexagon_covers_its_hexagon_once_and_zero_normals_become_up \
+  tests/ddm/test_ddm_base_maps.py::test_clamped_count_on_open_axes_takes_the_nearest_texel \
+  tests/ddm/test_ddm_base_maps.py::test_map_error_skips_every_lookup_that_touches_an_invalid_texel \
+  tests/ddm/test_ddm_base_maps.py::test_geometry_image_bytes_and_resolution_halving_gives_an_int \
+  tests/ddm/test_ddm_base_maps.py::test_diffusion_takes_the_first_texel_as_a_source \
+  tests/ddm/test_ddm_base_maps.py::test_prune_reads_the_tile_footprint_in_v \
+  tests/ddm/test_ddm_base_maps.py::test_prune_grows_the_footprint_by_one_texel_and_auto_starts_at_a_power_of_two \
+  tests/ddm/test_ddm_footprint.py::test_pixels_per_uv_is_the_projected_step_of_a_pinhole \
+  tests/ddm/test_ddm_footprint.py::test_orthographic_visibility_needs_front_and_frustum \
+  tests/ddm/test_ddm_footprint.py::test_auto_resolution_on_the_plane \
+  tests/ddm/test_ddm_footprint.py::test_weighted_quantile_ends \
+  tests/ddm/test_ddm_footprint.py::test_footprint_samples_of_mesh_and_analytic_bases \
+  tests/ddm/test_ddm_footprint.py::test_perspective_visibility_needs_front_and_both_frame_axes \
+  tests/ddm/test_ddm_layout.py::test_one_cell_layout_and_one_entry_pattern \
+  tests/ddm/test_ddm_layout.py::test_hex_rows_alternate_their_shift_and_gaps_shrink_hexagons \
+  tests/ddm/test_ddm_layout.py::test_layout_messages_and_the_default_seed \
+  tests/ddm/test_ddm_mapping.py::test_model_size_check_for_one_column_and_no_refit_without_auto \
+  tests/ddm/test_ddm_mapping.py::test_model_w_max_rule_and_memory_ratio \
+  tests/ddm/test_ddm_mapping.py::test_model_stats_clamped_mask_and_fold_message \
+  tests/ddm/test_ddm_charts.py::test_tile_reach_is_the_cell_or_the_overhang \
+  tests/ddm/test_ddm_charts.py::test_chart_maps_bytes_and_stats_and_pruned_count \
+  tests/ddm/test_ddm_charts.py::test_chart_maps_lookup_reproduces_every_stored_texel \
+  tests/ddm/test_ddm_charts.py::test_chart_map_error_is_zero_on_a_flat_mesh_and_falls_with_resolution \
+  tests/ddm/test_ddm_polygonal.py::test_mesh_curvature_bound_is_the_normal_turn_per_length \
+  tests/ddm/test_ddm_polygonal.py::test_mesh_sample_is_differentiable_in_uv \
+  tests/ddm/test_ddm_polygonal.py::test_mesh_curvature_bound_reads_every_edge_of_a_triangle \
+  tests/ddm/test_ddm_polygonal.py::test_mesh_normal_derivatives_match_finite_differences_inside_a_face"
+edges_bake="tests/bake/test_bake_cage_multistep.py::test_cage_ray_flags_a_second_crossing_and_only_that \
+  tests/bake/test_bake_cage_multistep.py::test_cage_tilted_along_the_bitangent_restores \
+  tests/bake/test_bake_extremes.py::test_dual_depth_is_the_next_surface_behind \
+  tests/bake/test_bake_extremes.py::test_without_meminfo_a_default_bake_still_fits \
+  tests/bake/test_bake_extremes.py::test_a_low_poly_a_fifth_of_the_diagonal_away_is_refused \
+  tests/bake/test_bake_extremes.py::test_memory_refusal_message_whole \
+  tests/bake/test_bake_extremes.py::test_a_low_poly_eleven_times_larger_is_refused \
+  tests/bake/test_bake_uv_raster.py::test_uv_warning_is_the_whole_sentence \
+  tests/bake/test_bake_uv_raster.py::test_texel_value_is_the_mean_over_its_aa_grid \
+  tests/bake/test_bake_uv_raster.py::test_conservative_band_texels_take_a_chart_point_of_their_own_footprint \
+  tests/bake/test_bake_uv_raster.py::test_an_isolated_sliver_chart_gets_no_texels_and_is_counted \
+  tests/bake/test_bake_uv_raster.py::test_overlap_is_measured_at_most_at_256 \
+  tests/bake/test_bake_uv_raster.py::test_overlap_count_is_the_texel_centres_inside_both_triangles \
+  tests/bake/test_bake_formats.py::test_unit_vectors_encode_as_documented_and_pngs_are_linear \
+  tests/bake/test_bake_formats.py::test_missing_map_message_names_the_file \
+  tests/bake/test_bake_formats.py::test_quantised_sidecars_record_their_bit_depth \
+  tests/bake/test_bake_formats.py::test_a_constant_map_round_trips_in_every_format \
+  tests/bake/test_bake_restore.py::test_restored_mesh_saves_as_obj_and_ply \
+  tests/bake/test_bake_restore.py::test_dropped_holes_are_reported \
+  tests/bake/test_bake_restore.py::test_restore_refuses_a_boolean_or_fractional_split \
+  tests/bake/test_bake_restore.py::test_restore_of_another_low_poly_message_whole \
+  tests/bake/test_bake_restore.py::test_map_sidecars_name_the_low_poly_written_beside_them \
+  tests/bake/test_bake_seams_holes.py::test_void_texels_of_a_closed_low_poly_take_their_neighbours_displacement \
+  tests/bake/test_bake_sphere.py::test_object_normals_of_a_sphere_are_radial \
+  tests/bake/test_bake_levels.py::test_orthographic_footprint_and_levels \
+  tests/bake/test_bake_levels.py::test_perspective_footprint_of_a_wide_film \
+  tests/bake/test_bake_levels.py::test_only_edges_inside_the_view_cone_count \
+  tests/bake/test_bake_levels.py::test_footprint_of_a_thin_lens_is_the_pinhole_one \
+  tests/bake/test_bake_mikktspace.py::test_decode_tangent_map_gives_the_object_normals \
+  tests/bake/test_bake_mikktspace.py::test_degenerate_triangles_copy_the_tangent_of_their_vertex \
+  tests/bake/test_bake_padding_tangent.py::test_padded_texels_are_counted \
+  tests/bake/test_bake_padding_tangent.py::test_texels_beyond_the_padding_hold_plus_z_normals"
+
 # The test selection of each measured module: the tests that exercise it, kept small so
 # that one mutant runs in seconds.
 declare -A SELECTION=(
   [mi_displace/evaluate/metrics.py]="tests/evaluate/test_metrics.py"
   [mi_displace/core/heightfield.py]="tests/core/test_heightfield.py"
   [mi_displace/core/surfaces.py]="tests/core/test_surfaces.py"
-  [mi_displace/core/tessellate.py]="tests/core/test_tessellate.py tests/core/test_core_mutants.py"
+  [mi_displace/core/tessellate.py]="tests/core/test_tessellate.py ${edges_core}"
   [mi_displace/ddm/mapping.py]="tests/ddm/test_ddm_mapping.py tests/ddm/test_ddm_orientation.py"
   [mi_displace/vdm/mesh_curvature.py]="tests/vdm/test_vdm_mesh_curvature.py tests/vdm/test_vdm_unseen.py::test_per_corner_normals_give_the_torus_curvature tests/vdm/test_vdm_unseen.py::test_zero_curvature_on_a_curved_mesh_warns"
   [mi_displace/vdm/table.py]="tests/vdm/test_vdm_table.py"
@@ -58,27 +161,27 @@ declare -A SELECTION=(
   [mi_displace/vdm/lookup.py]="tests/vdm/test_vdm_lookup.py tests/vdm/test_vdm_unseen.py tests/vdm/test_vdm_plugin.py::test_silhouettes_and_relief_follow_true_displacement tests/vdm/test_vdm_plugin.py::test_grazing_views_and_deep_relief tests/vdm/test_vdm_plugin.py::test_curvature_beyond_range_is_clamped_and_counted tests/vdm/test_vdm_plugin.py::test_depth_zero_is_the_nested_material"
   [mi_displace/vdm/steps.py]="tests/vdm/test_vdm_steps.py tests/vdm/test_vdm_unseen.py tests/vdm/test_vdm_plugin.py::test_silhouettes_and_relief_follow_true_displacement tests/vdm/test_vdm_plugin.py::test_grazing_views_and_deep_relief tests/vdm/test_vdm_plugin.py::test_curvature_beyond_range_is_clamped_and_counted tests/vdm/test_vdm_plugin.py::test_depth_zero_is_the_nested_material"
   [mi_displace/core/dicing.py]="tests/core/test_dicing.py"
-  [mi_displace/bake/trace.py]="tests/bake/test_bake_extremes.py tests/bake/test_bake_naive.py tests/bake/test_bake_cage_multistep.py::test_cage_offset_measures_along_the_cage tests/bake/test_bake_cage_multistep.py::test_cage_rays_that_miss_are_classified tests/bake/test_bake_cage_multistep.py::test_tilted_cage_direction_round_trip tests/bake/test_bake_mikktspace.py tests/bake/test_bake_mutants.py"
-  [mi_displace/bake/baker.py]="tests/bake/test_bake_extremes.py tests/bake/test_bake_sphere.py tests/bake/test_bake_cli.py tests/bake/test_bake_padding_tangent.py tests/bake/test_bake_mutants.py"
-  [mi_displace/bake/restore.py]="tests/bake/test_bake_restore.py tests/bake/test_bake_seams_holes.py tests/bake/test_bake_plugin.py::test_restored_shape_matches_restore tests/bake/test_bake_mutants.py"
-  [mi_displace/bake/formats.py]="tests/bake/test_bake_formats.py tests/bake/test_bake_faults.py tests/bake/test_bake_sphere.py tests/bake/test_bake_mutants.py"
-  [mi_displace/bake/uv_raster.py]="tests/bake/test_bake_extremes.py tests/bake/test_bake_naive.py tests/bake/test_bake_sphere.py::test_map_matches_function tests/bake/test_bake_mutants.py"
-  [mi_displace/bake/mikktspace.py]="tests/bake/test_bake_mikktspace.py tests/bake/test_bake_padding_tangent.py tests/bake/test_bake_mutants.py"
-  [mi_displace/bake/levels.py]="tests/bake/test_bake_levels.py tests/bake/test_bake_mutants.py"
-  [mi_displace/volume/maps.py]="tests/volume/test_volume_maps.py tests/volume/test_volume_mutants.py"
-  [mi_displace/volume/displacement.py]="tests/volume/test_volume_maps.py tests/volume/test_volume_normals.py tests/volume/test_volume_mutants.py"
-  [mi_displace/volume/field.py]="tests/volume/test_volume_normals.py tests/volume/test_volume_albedo.py tests/volume/test_volume_render.py tests/volume/test_volume_mutants.py"
-  [mi_displace/slicing/geometry.py]="tests/slicing/test_slicing.py tests/slicing/test_slicing_mutants.py"
-  [mi_displace/slicing/depth_object.py]="tests/slicing/test_depth_object.py tests/slicing/test_slicing_mutants.py"
-  [mi_displace/ddm/tiles.py]="tests/ddm/test_ddm_tiles.py tests/ddm/test_ddm_mutants.py"
-  [mi_displace/ddm/base_maps.py]="tests/ddm/test_ddm_base_maps.py tests/ddm/test_ddm_mutants.py"
-  [mi_displace/ddm/model.py]="tests/ddm/test_ddm_mapping.py tests/ddm/test_ddm_base_maps.py tests/ddm/test_ddm_mutants.py"
-  [mi_displace/ddm/charts.py]="tests/ddm/test_ddm_charts.py tests/ddm/test_ddm_polygonal.py tests/ddm/test_ddm_mutants.py"
-  [mi_displace/ddm/mesh_base.py]="tests/ddm/test_ddm_polygonal.py tests/ddm/test_ddm_charts.py tests/ddm/test_ddm_mutants.py"
-  [mi_displace/ddm/layout.py]="tests/ddm/test_ddm_layout.py tests/ddm/test_ddm_mutants.py"
-  [mi_displace/ddm/footprint.py]="tests/ddm/test_ddm_footprint.py tests/ddm/test_ddm_mutants.py"
-  [mi_displace/core/bezier.py]="tests/ddm/test_ddm_bezier.py tests/core/test_core_mutants.py"
-  [mi_displace/core/thickness.py]="tests/core/test_thickness.py tests/core/test_core_mutants.py"
+  [mi_displace/bake/trace.py]="tests/bake/test_bake_extremes.py tests/bake/test_bake_naive.py tests/bake/test_bake_cage_multistep.py::test_cage_offset_measures_along_the_cage tests/bake/test_bake_cage_multistep.py::test_cage_rays_that_miss_are_classified tests/bake/test_bake_cage_multistep.py::test_tilted_cage_direction_round_trip tests/bake/test_bake_mikktspace.py ${edges_bake}"
+  [mi_displace/bake/baker.py]="tests/bake/test_bake_extremes.py tests/bake/test_bake_sphere.py tests/bake/test_bake_cli.py tests/bake/test_bake_padding_tangent.py ${edges_bake}"
+  [mi_displace/bake/restore.py]="tests/bake/test_bake_restore.py tests/bake/test_bake_seams_holes.py tests/bake/test_bake_plugin.py::test_restored_shape_matches_restore ${edges_bake}"
+  [mi_displace/bake/formats.py]="tests/bake/test_bake_formats.py tests/bake/test_bake_faults.py tests/bake/test_bake_sphere.py ${edges_bake}"
+  [mi_displace/bake/uv_raster.py]="tests/bake/test_bake_extremes.py tests/bake/test_bake_naive.py tests/bake/test_bake_sphere.py::test_map_matches_function ${edges_bake}"
+  [mi_displace/bake/mikktspace.py]="tests/bake/test_bake_mikktspace.py tests/bake/test_bake_padding_tangent.py ${edges_bake}"
+  [mi_displace/bake/levels.py]="tests/bake/test_bake_levels.py ${edges_bake}"
+  [mi_displace/volume/maps.py]="tests/volume/test_volume_maps.py ${edges_volume}"
+  [mi_displace/volume/displacement.py]="tests/volume/test_volume_maps.py tests/volume/test_volume_normals.py ${edges_volume}"
+  [mi_displace/volume/field.py]="tests/volume/test_volume_normals.py tests/volume/test_volume_albedo.py tests/volume/test_volume_render.py ${edges_volume}"
+  [mi_displace/slicing/geometry.py]="tests/slicing/test_slicing.py ${edges_slicing}"
+  [mi_displace/slicing/depth_object.py]="tests/slicing/test_depth_object.py ${edges_slicing}"
+  [mi_displace/ddm/tiles.py]="tests/ddm/test_ddm_tiles.py ${edges_ddm}"
+  [mi_displace/ddm/base_maps.py]="tests/ddm/test_ddm_base_maps.py ${edges_ddm}"
+  [mi_displace/ddm/model.py]="tests/ddm/test_ddm_mapping.py tests/ddm/test_ddm_base_maps.py ${edges_ddm}"
+  [mi_displace/ddm/charts.py]="tests/ddm/test_ddm_charts.py tests/ddm/test_ddm_polygonal.py ${edges_ddm}"
+  [mi_displace/ddm/mesh_base.py]="tests/ddm/test_ddm_polygonal.py tests/ddm/test_ddm_charts.py ${edges_ddm}"
+  [mi_displace/ddm/layout.py]="tests/ddm/test_ddm_layout.py ${edges_ddm}"
+  [mi_displace/ddm/footprint.py]="tests/ddm/test_ddm_footprint.py ${edges_ddm}"
+  [mi_displace/core/bezier.py]="tests/ddm/test_ddm_bezier.py ${edges_core}"
+  [mi_displace/core/thickness.py]="tests/core/test_thickness.py ${edges_core}"
 )
 
 root=$PWD

@@ -49,3 +49,22 @@ def _release_scenes():
     yield
     gc.collect()
 
+
+
+@pytest.fixture(scope="session")
+def built_once():
+    """``built_once(name, build)``: the result of ``build()``, built once per test run and
+    variant and shared by every test that asks for ``name`` (a fixture that takes ``variant``
+    first, so that the variant is set).  For expensive inputs (a bake, captured depth images)
+    that tests only read: a test must not change what it gets."""
+    import mitsuba as mi
+
+    built = {}
+
+    def get(name, build):
+        key = (mi.variant(), name)
+        if key not in built:
+            built[key] = build()
+        return built[key]
+
+    return get

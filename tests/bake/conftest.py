@@ -56,3 +56,14 @@ def plane(size=1.0, z=0.0, n=1, uv=True, flip=False):
     if flip:
         faces = faces[:, ::-1]
     return MeshData(pos, faces.astype(np.int64), (pos[:, :2] / size).astype(np.float32) if uv else None)
+
+
+def tilted_plane(n=8, z0=0.02, slope=0.1, slope_y=0.0):
+    """A plane z = z0 + slope * x + slope_y * y (n x n quads) over [-0.1, 1.1]^2: the rays
+    along the low-poly's +z normal measure d = z0 + slope * x + slope_y * y exactly."""
+    from mi_displace.bake.meshdata import MeshData
+
+    p = plane(size=1.2, n=n)
+    pos = p.positions - np.float32([0.1, 0.1, 0.0])
+    pos[:, 2] = z0 + slope * pos[:, 0] + slope_y * pos[:, 1]
+    return MeshData(pos, p.faces, None)

@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 from conftest import plane
+from test_bake_extremes import _stack
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.meshdata import MeshData, save_obj
@@ -68,3 +69,32 @@ def test_two_maps_restore_an_overhang_one_map_cannot(variant, tmp_path):
     assert d2["hausdorff_ab"] < 0.5 * d1["hausdorff_ab"], (d1["hausdorff_ab"], d2["hausdorff_ab"])
     assert d2["hausdorff_rel"] < d1["hausdorff_rel"]
     assert d2["rms_rel"] < 1.25 * d1["rms_rel"], (d1["rms_rel"], d2["rms_rel"])
+
+
+def test_cage_ray_flags_a_second_crossing_and_only_that(variant):
+    # cage 0.1 above the low-poly: the ray from the cage meets z = 0.02 first (t = 0.08),
+    # then z = -0.02 within max_distance: a fold along the cage direction (ambiguous);
+    # one layer alone is unambiguous
+    low = plane(n=2)
+    r = bake(_stack(plane(z=0.02, n=4), plane(z=-0.02, n=4)), low, res=8, cage_offset=0.1,
+             max_distance=0.05, pad=0)
+    assert r.record["counts"]["ambiguous"] == 64
+    assert np.allclose(r.maps["displacement"], 0.02, atol=1e-6)
+    r = bake(_stack(plane(z=0.02, n=4), plane(z=-0.07, n=4)), low, res=8, cage_offset=0.1,
+             max_distance=0.05, pad=0)
+    assert r.record["counts"]["ambiguous"] == 0 and r.record["counts"]["ok"] == 64
+
+
+def test_cage_tilted_along_the_bitangent_restores(variant, tmp_path):
+    # the direction's y (bitangent) component must be used as such: a cage shifted along +y
+    from mi_displace.bake.meshdata import save_obj
+    from mi_displace.bake.restore import restore
+
+    low = plane(n=2)
+    cage = MeshData(low.positions + np.float32([0.0, 0.05, 0.1]), low.faces, low.uvs)
+    save_obj(tmp_path / "cage.obj", cage.positions, cage.faces, cage.uvs)
+    bake(plane(z=0.02, n=4, size=1.2), low, res=16, cage=tmp_path / "cage.obj", max_distance=0.05,
+         pad=2, out_dir=tmp_path / "b", map_formats=["float"])
+    out = restore(tmp_path / "b" / "low.obj", tmp_path / "b" / "float.exr", levels=1)
+    moved = out.positions - np.c_[out.uvs, np.zeros(len(out.uvs))]
+    assert np.allclose(moved, [0.0, 0.01, 0.02], atol=1e-5)

@@ -169,3 +169,64 @@ def test_anti_aliased_texel_keeps_the_samples_that_hit(variant):
     r = bake(high, plane(n=2), res=16, aa=2, max_distance=0.05, pad=0, min_hit_fraction=0.25)
     assert np.all(r.status[:, 7] == OK) and np.allclose(r.maps["displacement"][:, 7], 0.02, atol=1e-6)
     assert np.all(r.status[:, 8:] == MISS)
+
+
+def test_dual_depth_is_the_next_surface_behind(variant):
+    # the front surface at +0.03 and a far wall at -0.02 (facing away, as a thin shell's
+    # inner side does): back_depth is -0.02; without a second surface it is -max_distance
+    low = plane(n=2)
+    r = bake(_stack(plane(z=0.03, n=4), plane(z=-0.02, n=4, flip=True)), low, res=8,
+             max_distance=0.1, pad=0, map_formats=["dual_d8_n16"])
+    assert np.allclose(r.maps["displacement"], 0.03, atol=1e-5)
+    assert np.allclose(r.maps["back_depth"], -0.02, atol=1e-5)
+    r = bake(plane(z=-0.04, n=4), low, res=8, max_distance=0.1, pad=0, map_formats=["dual_d8_n16"])
+    assert np.allclose(r.maps["displacement"], -0.04, atol=1e-5)
+    assert np.allclose(r.maps["back_depth"], -0.1, atol=1e-6)
+
+
+def test_without_meminfo_a_default_bake_still_fits(monkeypatch):
+    # no MemAvailable to read (not Linux, or /proc hidden): the fallback must be an amount
+    # that admits an ordinary bake (a 1024^2 map, aa 2), not zero
+    class NoProc:
+        def __init__(self, *args):
+            pass
+
+        def read_text(self):
+            raise OSError("no /proc")
+
+    monkeypatch.delenv("MI_DISPLACE_BAKE_MEMORY", raising=False)
+    monkeypatch.setattr(baker, "Path", NoProc)
+    have = baker.available_memory()
+    assert have > baker.memory_estimate(1024, 1024, 2) / 0.8
+    assert baker.check_settings(1024, 2, None, 8) == (1024, 1024)
+
+
+def test_a_low_poly_a_fifth_of_the_diagonal_away_is_refused(variant):
+    high = plane(z=0.02, n=4)
+    shift = np.float32(0.2 * high.diagonal)
+    far = plane(n=2)
+    far = MeshData(far.positions + np.float32([1.0, 0.0, 0.0]) * shift + np.float32([1, 0, 0]),
+                   far.faces, far.uvs)
+    with pytest.raises(ValueError, match=r"^low-poly does not sit near the high-poly: bounding boxes"):
+        bake(high, far, res=8, max_distance=0.05)
+    near = plane(n=2)       # a gap of 1 % of the diagonal is accepted
+    near = MeshData(near.positions + np.float32([1.0 + 0.01 * high.diagonal, 0, 0]), near.faces, near.uvs)
+    from mi_displace.bake.baker import prepare_inputs
+
+    prepare_inputs(high, near)
+
+
+def test_memory_refusal_message_whole(variant, monkeypatch):
+    need = baker.memory_estimate(512, 512, 2)
+    monkeypatch.setenv("MI_DISPLACE_BAKE_MEMORY", str(need))
+    with pytest.raises(ValueError) as e:
+        bake(plane(z=0.02), plane(), res=512, aa=2)
+    assert str(e.value) == (f"res: a 512x512 bake with aa 2 needs about {need / 2**30:.1f} GiB but only "
+                            f"{need / 2**30:.1f} GiB is available; lower 'res' or 'aa'")
+
+
+def test_a_low_poly_eleven_times_larger_is_refused(variant):
+    high = plane(z=0.02, n=4)
+    big = plane(size=10.5, n=2)          # overlaps the high-poly, but 10.5x its diagonal
+    with pytest.raises(ValueError, match="^low-poly does not sit near the high-poly: bounding boxes"):
+        bake(high, big, res=8, max_distance=0.05)

@@ -139,3 +139,87 @@ def test_a_float_map_without_a_y_channel_is_named(tmp_path):
     formats.write_exr_channels(path, {"D": _maps()["displacement"]})   # channels Mitsuba cannot read
     with pytest.raises(ValueError, match=r"float\.exr' has no 'Y' channel"):
         formats.read_map(path)
+
+
+def _png_chunks(path):
+    """The chunk types of a PNG file, read from its bytes."""
+    data, pos, kinds = open(path, "rb").read(), 8, []
+    while pos < len(data):
+        n = int.from_bytes(data[pos:pos + 4], "big")
+        kinds.append(data[pos + 4:pos + 8].decode())
+        pos += 12 + n
+    return kinds
+
+
+def test_unit_vectors_encode_as_documented_and_pngs_are_linear(tmp_path, variant):
+    # formats docstring: components x in [-1, 1] stored as round((x + 1) / 2 * 255), PNGs
+    # are linear data (no sRGB / gamma chunk claiming a curve)
+    from mi_displace.bake import formats
+
+    x = np.float32([-1.0, -0.5, 0.0, 0.5, 1.0])
+    n = np.zeros((1, 5, 3), np.float32)
+    n[0, :, 0] = x
+    n[0, :, 2] = np.sqrt(1 - x ** 2)
+    path = formats.write_map(tmp_path, "normal_object", {"displacement": np.zeros((1, 5), np.float32),
+                             "normal_tangent": n, "direction_tangent": n, "normal_object": n}, {})
+    q = formats.read_png_raw(path)[0, :, 0]
+    assert q.tolist() == np.floor((x.astype(np.float64) + 1) / 2 * 255 + 0.5).astype(int).tolist()
+    assert q[0] == 0 and q[-1] == 255
+    for fmt in ("d8", "d16", "normal_object"):
+        chunks = _png_chunks(formats.write_map(tmp_path, fmt, {
+            "displacement": np.zeros((1, 5), np.float32), "normal_tangent": n,
+            "direction_tangent": n, "normal_object": n}, {}))
+        assert chunks[0] == "IHDR" and chunks[-1] == "IEND"
+        assert not {"sRGB", "gAMA", "iCCP"} & set(chunks), (fmt, chunks)
+
+
+def test_missing_map_message_names_the_file(tmp_path):
+    from mi_displace.bake import formats
+
+    missing = tmp_path / "none.png"
+    with pytest.raises(FileNotFoundError) as e:
+        formats.read_map(missing)
+    assert str(e.value) == f"map file {str(missing)!r} does not exist"
+
+
+def test_quantised_sidecars_record_their_bit_depth(tmp_path):
+    # the §1.2 table (formats docstring): displacement bits of each quantised format
+    from mi_displace.bake import formats
+
+    rng = np.random.default_rng(3)
+    n = np.dstack([np.zeros((4, 6, 2)), np.ones((4, 6, 1))]).astype(np.float32)
+    maps = {"displacement": rng.uniform(-1, 1, (4, 6)).astype(np.float32), "normal_tangent": n,
+            "normal_object": n, "direction_tangent": n,
+            "back_depth": rng.uniform(-1, 0, (4, 6)).astype(np.float32)}
+    table = {"d8": 8, "d16": 16, "dir24_d8": 8, "dir16_d16": 16, "d8_n24": 8, "dual_d8_n16": 8,
+             "d16_n16": 16, "float": 32}
+    for fmt, bits in table.items():
+        formats.write_map(tmp_path, fmt, maps, {})
+        assert formats.read_metadata(tmp_path / f"{fmt}{formats.FORMATS[fmt]}")["displacement"]["bits"] == bits
+
+
+def test_a_constant_map_round_trips_in_every_format(tmp_path):
+    # hi == lo: the quantisation span falls back to 1 (no division by zero), every texel
+    # decodes to the constant
+    from mi_displace.bake import formats
+
+    n = np.dstack([np.zeros((4, 6, 2)), np.ones((4, 6, 1))]).astype(np.float32)
+    maps = {"displacement": np.full((4, 6), 0.25, np.float32), "normal_tangent": n,
+            "normal_object": n, "normal_mitsuba": n, "direction_tangent": n, "back_depth": np.full((4, 6), 0.25, np.float32),
+            "ao": np.full((4, 6), 0.5, np.float32), "curvature": np.zeros((4, 6), np.float32),
+            "cavity": np.zeros((4, 6), np.float32), "albedo": np.full((4, 6, 3), 0.5, np.float32)}
+    import warnings
+
+    for fmt in formats.FORMATS:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")            # no 0 / 0 on the way
+            path = formats.write_map(tmp_path, fmt, maps, {})
+        q = formats.read_metadata(path).get("displacement")
+        assert q is None or q["scale"] > 0, fmt       # a consumer may divide by it
+        out = formats.read_map(path)
+        if out["displacement"] is not None:
+            assert out["valid"] is None               # no mask named by this sidecar
+            assert np.allclose(out["displacement"], 0.25, atol=1e-7), fmt
+        name = fmt.removesuffix("_float")
+        if name in ("ao", "curvature", "cavity", "albedo"):   # a flat surface map: its constant
+            assert np.allclose(out[name], maps[name], atol=1e-4), fmt

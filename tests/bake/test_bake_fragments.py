@@ -22,10 +22,15 @@ SCENE = """<scene version="3.0.0">
 
 
 @pytest.fixture
-def baked(sphere_pair, tmp_path):
-    high, low = sphere_pair
-    r = bake(high, low, res=64, out_dir=tmp_path / "bake_out", max_distance=0.2)
-    return high, low, r, tmp_path / "bake_out"
+def baked(sphere_pair, built_once, tmp_path_factory):
+    """(high, low, bake result, its folder): the sphere pair baked at 64² once per run (read
+    only)."""
+    def build():
+        high, low = sphere_pair
+        out = tmp_path_factory.mktemp("bake_out")
+        return high, low, bake(high, low, res=64, out_dir=out, max_distance=0.2), out
+
+    return built_once("fragments", build)
 
 
 def _render(fragment: Path):

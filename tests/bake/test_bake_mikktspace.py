@@ -3,7 +3,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import _sphere_mesh, plane
+from conftest import _sphere_mesh, plane, tilted_plane
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.meshdata import MeshData, vertex_normals
@@ -131,3 +131,38 @@ def test_bake_decoded_with_mikktspace_gives_the_object_space_normals(sphere_pair
     err = _angle_deg(decoded[use], r.maps["normal_object"][use])
     assert _angle_deg(r.maps["normal_tangent"][use], [0, 0, 1]).max() > 5    # a real relief
     assert int((err > 1.0).sum()) == 0, f"{int((err > 1).sum())} texels over 1 deg (max {err.max():.2f})"
+
+
+@pytest.mark.parametrize("mirror", [False, True])
+def test_decode_tangent_map_gives_the_object_normals(variant, mirror):
+    # a tilted high-poly z = 0.02 + 0.1 x + 0.05 y: its normal is (-0.1, -0.05, 1) / |.|;
+    # decoding the tangent-space map in MikkTSpace's frame (mikktspace.decode_tangent_map)
+    # gives it back, also with the UVs mirrored in u (bitangent sign -1)
+    from mi_displace.bake.mikktspace import decode_tangent_map
+
+    low = plane(n=2)
+    if mirror:
+        low.uvs[:, 0] = 1 - low.uvs[:, 0]
+    r = bake(tilted_plane(slope_y=0.05), low, res=16, max_distance=0.2, pad=0)
+    out, inside = decode_tangent_map(r.low, r.maps["normal_tangent"])
+    truth = np.float32([-0.1, -0.05, 1]) / np.linalg.norm([-0.1, -0.05, 1])
+    assert inside.sum() == 256
+    assert np.allclose(out[inside], truth, atol=1e-4)
+    assert np.allclose(r.maps["normal_object"][inside], truth, atol=1e-4)
+
+
+def test_degenerate_triangles_copy_the_tangent_of_their_vertex(variant):
+    # MikkTSpace's DegenEpilogue: a triangle with two corners at one position takes, per
+    # corner, the tangent of a good corner of the same (welded) vertex.  UVs (y, x): the
+    # tangent dP/du is +y everywhere, not the default (1, 0, 0)
+    from mi_displace.bake.meshdata import vertex_normals
+    from mi_displace.bake.mikktspace import mikktspace
+
+    low = plane(n=2)
+    uvs = low.uvs[:, ::-1].copy()
+    for bad in ([4, 5, 4], [4, 4, 5], [5, 4, 4]):
+        faces = np.concatenate([low.faces, [bad]])
+        t, s = mikktspace(low.positions, faces, vertex_normals(low.positions, low.faces), uvs)
+        assert np.allclose(t[:-1], [0, 1, 0], atol=1e-6)
+        assert np.allclose(t[-1], [0, 1, 0], atol=1e-6), bad
+        assert np.all(s[-1] == s[0, 0])

@@ -21,15 +21,19 @@ def _angle_deg(a, b):
 
 
 @pytest.fixture
-def charts_bake(sphere_pair, tmp_path):
+def charts_bake(sphere_pair, built_once, tmp_path_factory):
     """The displaced sphere baked over a coarse sphere that xatlas cuts into several charts
-    (float, MikkTSpace and Mitsuba-frame maps at RES^2, aa 1: texel centres)."""
-    high, low = sphere_pair
-    low = _sphere_mesh(16, 8, 0.0)
-    low = MeshData(low.positions, low.faces, name="low")     # no UVs: the baker unwraps
-    r = bake(high, low, res=RES, out_dir=tmp_path, max_distance=0.2, pad=4,
-             map_formats=["float", "normal_tangent", "normal_mitsuba"])
-    return r, tmp_path
+    (float, MikkTSpace and Mitsuba-frame maps at RES^2, aa 1: texel centres): (result, its
+    folder), baked once per run (read only)."""
+    def build():
+        high, _ = sphere_pair
+        low = _sphere_mesh(16, 8, 0.0)
+        low = MeshData(low.positions, low.faces, name="low")     # no UVs: the baker unwraps
+        out = tmp_path_factory.mktemp("charts_bake")
+        return bake(high, low, res=RES, out_dir=out, max_distance=0.2, pad=4,
+                    map_formats=["float", "normal_tangent", "normal_mitsuba"]), out
+
+    return built_once("charts_bake", build)
 
 
 def _decoded_by_mitsuba(out_dir, bsdf_type, map_file, low):

@@ -44,3 +44,25 @@ def test_tangent_space_normal_of_a_tilted_high_poly(variant, mirror):
     # shader rule: N = normalize(x t + y b + z n) with t = +-x, b = +y, n = +z
     sx = -1 if mirror else 1
     assert np.allclose(nt, [sx * -np.sin(a), 0, np.cos(a)], atol=1e-5)
+
+
+def test_padded_texels_are_counted(variant):
+    # a chart of 4 x 4 texels in an 8 x 8 map, padded by 2 texels: the 6 x 6 block around it
+    low = plane(n=2)
+    low = MeshData(low.positions, low.faces, (low.uvs * np.float32(0.5)).astype(np.float32))
+    r = bake(plane(z=0.02, n=4), low, res=8, max_distance=0.05, pad=2)
+    c = r.record["counts"]
+    assert c["covered"] == 16 and c["padded"] == int(r.maps["filled"].sum()) - 16 == 36 - 16
+
+
+def test_texels_beyond_the_padding_hold_plus_z_normals(variant):
+    # the chart fills the left half of each row; texels beyond the padding are empty and
+    # hold displacement 0 and +z normals (baker._texel_average), never NaN
+    low = plane(n=2)
+    low = MeshData(low.positions, low.faces, (low.uvs * np.float32([0.5, 1.0])).astype(np.float32))
+    r = bake(plane(z=0.02, n=4), low, res=16, max_distance=0.05, pad=1)
+    empty = ~r.maps["filled"]
+    assert empty.sum() == 16 * 7
+    for name in ("normal_object", "normal_tangent", "direction_tangent"):
+        assert np.array_equal(r.maps[name][empty], np.tile(np.float32([0, 0, 1]), (int(empty.sum()), 1))), name
+    assert np.all(r.maps["displacement"][empty] == 0)

@@ -130,3 +130,72 @@ def test_restore_follows_how_the_map_was_measured(tmp_path, variant):
     restore(tmp_path / "c" / "low.obj", tmp_path / "c" / "float.exr")
     with pytest.raises(ValueError, match="baked over a low-poly with 8 faces"):
         restore(plane(n=3), tmp_path / "n" / "d16.png")
+
+
+def test_restored_mesh_saves_as_obj_and_ply(tmp_path, variant):
+    import trimesh
+
+    from mi_displace.bake.meshdata import load_mesh
+    from mi_displace.bake.restore import restore
+
+    out = restore(plane(n=2), {"displacement": np.full((8, 8), 0.03, np.float32)}, levels=1)
+    assert np.allclose(out.positions[:, 2], 0.03, atol=1e-6)
+    out.save(tmp_path / "r.obj")
+    back = load_mesh(tmp_path / "r.obj", "restored")
+    assert len(back.faces) == len(out.faces) == 8 * 4
+    assert np.allclose(np.sort(back.positions[:, 2]), 0.03, atol=1e-6)
+    assert np.allclose(back.uvs[back.faces], out.uvs[out.faces], atol=1e-6)
+    out.save(tmp_path / "r.PLY")
+    ply = trimesh.load(tmp_path / "r.PLY", process=False)
+    assert np.allclose(ply.vertices, out.positions, atol=1e-6)
+    with pytest.raises(ValueError, match=r"^out: restored mesh must be \.ply or \.obj, got '.*r\.stl'$"):
+        out.save(tmp_path / "r.stl")
+
+
+def test_dropped_holes_are_reported(variant):
+    from mi_displace.bake.restore import restore
+
+    valid = np.ones((32, 32), np.float32)
+    valid[8:24, 8:24] = 0
+    out = restore(plane(n=4), {"displacement": np.zeros((32, 32), np.float32), "valid": valid}, levels=2)
+    assert out.report["holes"] == "dropped: faces with 2 or 3 void vertices (open low-poly)"
+    assert out.report["dropped_faces"] == 16 * 32 - len(out.faces) and out.report["dropped_faces"] > 0
+    assert not out.report["closed"]
+
+
+def test_map_sidecars_name_the_low_poly_written_beside_them(variant, tmp_path):
+    from mi_displace.bake.formats import read_metadata
+    from mi_displace.bake.restore import low_for_map
+
+    bake(plane(z=0.02, n=4), plane(n=2), res=8, max_distance=0.05, out_dir=tmp_path,
+         map_formats=["d16", "float"])
+    for name in ("d16.png", "float.exr"):
+        assert low_for_map(tmp_path / name) == str(tmp_path / "low.obj")
+        meta = read_metadata(tmp_path / name)
+        assert meta["low_faces"] == 8 and meta["valid"] == "valid.png" and meta["aa"] == 1
+        assert meta["max_distance"] == 0.05 and meta["cage"] is None
+    assert (tmp_path / "low.obj").is_file()
+
+
+def test_restore_refuses_a_boolean_or_fractional_split(variant):
+    from mi_displace.bake.restore import edge_splits
+
+    for bad in (True, 2.5, 65):
+        with pytest.raises(ValueError, match=r"^split: must be an integer in \[1, 64\]"):
+            edge_splits(None, bad)
+    for bad in (False, 1.5, 7):
+        with pytest.raises(ValueError, match=r"^levels: must be an integer in \[0, 6\]"):
+            edge_splits(bad, None)
+    assert edge_splits(None, 3) == 3 and edge_splits(3, None) == 8 and edge_splits(None, None) == 4
+
+
+def test_restore_of_another_low_poly_message_whole(variant, tmp_path):
+    from mi_displace.bake.restore import restore
+
+    bake(plane(z=0.02, n=4), plane(n=2), res=8, max_distance=0.05, out_dir=tmp_path, map_formats=["d16"])
+    with pytest.raises(ValueError) as e:
+        restore(plane(n=3), tmp_path / "d16.png")
+    assert str(e.value) == ("low: the map was baked over a low-poly with 8 faces, this one has 18; "
+                            "pass the low.obj the baker wrote beside the map")
+    out = restore(tmp_path / "low.obj", {"displacement": np.zeros((8, 8), np.float32)}, levels=0)
+    assert out.report["void_vertices"] == 0 and out.report["holes"] == "no validity mask"

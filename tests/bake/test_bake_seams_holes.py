@@ -98,3 +98,22 @@ def test_low_obj_shares_positions_across_uv_seams(variant, tmp_path):
     np.testing.assert_array_equal(back.positions[back.faces], low.positions[low.faces])
     np.testing.assert_array_equal(back.uvs[back.faces], low.uvs[low.faces])
     assert r.record["low"]["boundary_edges"] == 0
+
+
+def test_void_texels_of_a_closed_low_poly_take_their_neighbours_displacement(variant):
+    # a closed sphere, displacement 0.04 everywhere it was measured; the void patch holds
+    # garbage (0.5) in the map: its vertices take the harmonic interpolation of the measured
+    # displacement vectors around them (0.04 radially, so a little shorter where the ring's
+    # directions fan out), and no face is dropped
+
+    from mi_displace.bake.restore import restore
+
+    low = _sphere_mesh(24, 12, 0.0)
+    disp = np.full((64, 64), 0.04, np.float32)
+    valid = np.ones((64, 64), np.float32)
+    disp[27:37, 27:37], valid[24:40, 24:40] = 0.5, 0.0   # garbage 3 texels inside the void
+    out = restore(low, {"displacement": disp, "valid": valid}, levels=1)
+    assert out.report["closed"] and out.report["void_vertices"] > 0 and out.report["dropped_faces"] == 0
+    assert len(out.faces) == 4 * len(low.faces)
+    radius = np.linalg.norm(out.positions, axis=1)
+    assert np.abs(radius - 1.04).max() < 0.03              # the garbage would give 1.5

@@ -1,9 +1,10 @@
 """Analytic check: a sphere displaced by a known function, baked onto the plain sphere."""
 import numpy as np
-from conftest import AMPLITUDE, sphere_height
+from conftest import AMPLITUDE, _sphere_mesh, sphere_height
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.formats import read_map
+from mi_displace.bake.meshdata import MeshData
 from mi_displace.bake.restore import restore
 
 
@@ -40,3 +41,26 @@ def test_quantised_maps_restore_within_their_step(sphere_pair, tmp_path):
     high, low = sphere_pair
     r = bake(high, low, res=128, out_dir=tmp_path, map_formats=["float", "d16", "d8"], max_distance=0.2)
     check_quantised_restore(tmp_path, r)
+
+
+def test_object_normals_of_a_sphere_are_radial(variant):
+    # a finer sphere of radius 1.02 over the unit sphere: the high-poly's smooth shading normal
+    # at each texel is the radial direction of the texel's UV point (analytic parametrisation)
+    import drjit as dr
+    import mitsuba as mi
+
+    from mi_displace.core import surfaces
+
+    high = _sphere_mesh(96, 48, 0.0)
+    high = MeshData(high.positions * np.float32(1.02), high.faces, None)
+    r = bake(high, _sphere_mesh(48, 24, 0.0), res=64, max_distance=0.1, pad=0)
+    rows, cols = np.nonzero(r.covered)
+    u, v = (cols + 0.5) / 64, 1 - (rows + 0.5) / 64       # formats.UV_CONVENTION
+    s = surfaces.make_base("sphere", radius=1.0).sample(mi.Float(u), mi.Float(v))
+    radial = np.stack([np.asarray(c) for c in dr.normalize(s.p)], 1)
+    n = r.maps["normal_object"][rows, cols]
+    cos = (n * radial).sum(1)
+    assert len(cos) > 0.9 * 64 * 64 and np.median(cos) > 0.9999 and cos.min() > 0.998
+    # the low-poly's chords lie inside the unit sphere by at most 1 - cos(pi / 24) (24 rings)
+    d = r.maps["displacement"][rows, cols]
+    assert d.min() > 0.02 - 1e-3 and d.max() < 0.02 + (1 - np.cos(np.pi / 24)) * 1.02

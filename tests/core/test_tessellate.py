@@ -380,3 +380,45 @@ def test_smooth_displaced_normals_fall_back_to_n_on_a_degenerate_frame(variant):
     tilted = tessellate.smooth_displaced_normals(n, s, mi.Vector3f(0, 1, 0), zero, zero, mi.Float(0.1),
                                                  mi.Vector2f(0.0, 0.7), 1.0)
     assert np.allclose(np.array(tilted).ravel(), np.array([0, -0.7, 1]) / np.hypot(0.7, 1), atol=1e-6)
+
+
+def test_group_mean_of_scalars_and_vectors(variant):
+    groups = mi.UInt32([0, 1, 0, 2, 1, 0])
+    x = mi.Float([1.0, 2.0, 3.0, 10.0, 6.0, 8.0])
+    assert np.allclose(np.asarray(tessellate.group_mean(x, groups, 3)), [4, 4, 4, 10, 4, 4])
+    v = mi.Vector3f(x, 2 * x, dr.zeros(mi.Float, 6) - 1)
+    mean = np.asarray(tessellate.group_mean(v, groups, 3)).T
+    assert np.allclose(mean, np.c_[[4, 4, 4, 10, 4, 4], [8, 8, 8, 20, 8, 8], -np.ones(6)])
+
+
+def test_vertex_frames_weight_the_triangles_by_area():
+    """Two triangles of different area and different Jacobians around vertex 0: its S_u, S_v
+    are their area-weighted mean (each triangle's [S_u S_v] solved from its edges and UV
+    edges with NumPy)."""
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.5], [-2, 0, 1.0]])
+    uv = np.array([[0, 0], [1, 0], [0, 1], [-1, 0.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    nrm = np.tile([0, 0, 1.0], (4, 1))
+    s_u, s_v, _, _ = tessellate.vertex_frames(pos, nrm, uv, faces)
+    total, weight = np.zeros((2, 3)), 0.0
+    for f in faces:
+        e = np.stack([pos[f[1]] - pos[f[0]], pos[f[2]] - pos[f[0]]], 1)       # (3, 2)
+        d = np.stack([uv[f[1]] - uv[f[0]], uv[f[2]] - uv[f[0]]], 1)           # (2, 2)
+        jac = e @ np.linalg.inv(d)                                            # [S_u S_v]
+        area = 0.5 * np.linalg.norm(np.cross(e[:, 0], e[:, 1]))
+        total += area * jac.T
+        weight += area
+    assert np.allclose(s_u[0], total[0] / weight, atol=1e-6)
+    assert np.allclose(s_v[0], total[1] / weight, atol=1e-6)
+
+
+def test_zero_vertex_normals_fall_back_to_the_tangent_frame(variant):
+    """Vertex normals that vanish (here: given as zero) fall back to the normal of the
+    tangent frame S_u x S_v, however small the frame (a 0.5 x 0.5 square in the x-z plane
+    over the unit uv square: |S_u x S_v| = 0.25), not to +z."""
+    pos = np.array([[0, 0, 0], [0.5, 0, 0], [0.5, 0, 0.5], [0, 0, 0.5]])
+    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    t = tessellate.displace_mesh(pos, np.zeros((4, 3)), uv, faces, None, 0.0, 0.0, 1)
+    n = np.asarray(t.base_normals).T
+    assert np.allclose(n, [0, -1, 0], atol=1e-6)      # (0.5, 0, 0) x (0, 0, 0.5) / 0.25

@@ -104,3 +104,94 @@ def test_spot_is_flagged_at_its_tail_only(variant):
     for scale in (0.02, 0.025):
         check = _full_depth_check(pos[used], nrm[used], uvs[used], body, base, scale)
         assert check["crossing_vertices"] == 0, (scale, check)
+
+
+def test_crossing_check_without_displacement_or_vertices(variant):
+    """No displacement (zero height) and an empty tessellation: nothing crosses, exactly."""
+    flat = tessellate.Tessellation(mi.Point3f([0, 1, 0], [0, 0, 1], [0, 0, 0]),
+                                   mi.Vector3f([0, 0, 0], [0, 0, 0], [1, 1, 1]),
+                                   mi.Point2f([0, 1, 0], [0, 0, 1]), mi.Vector3u([0], [1], [2]))
+    assert crossing_check(flat, thickness=0.1) == {
+        "crossing_vertices": 0, "vertices": 3, "max_depth_ratio": 0.0}
+    empty = tessellate.Tessellation(mi.Point3f(), mi.Vector3f(), mi.Point2f(), mi.Vector3u(),
+                                    displacement=mi.Float())
+    assert crossing_check(empty, thickness=0.1) == {
+        "crossing_vertices": 0, "vertices": 0, "max_depth_ratio": 0.0}
+
+
+def test_displacement_of_exactly_the_thickness_reaches_but_does_not_cross(variant):
+    """A parametric base of thickness 0.25 (torus tube radius 0.125): an inward displacement
+    of exactly 0.25 (d = 0.25 (0 - 1), exact in float32) touches the other side; a crossing
+    is a displacement *deeper* than the thickness (ratio > 1)."""
+    torus = surfaces.Torus(1.0, 0.125)
+    assert torus.thickness() == 0.25
+    t = tessellate.displace_parametric(torus, constant(0.0), 0.25, 1.0, 16, 8)
+    assert np.all(np.asarray(t.displacement) == -0.25)
+    assert crossing_check(t, thickness=0.25)["crossing_vertices"] == 0
+    t = tessellate.displace_parametric(torus, constant(0.0), 0.2501, 1.0, 16, 8)
+    check = crossing_check(t, thickness=0.25)
+    assert check["crossing_vertices"] == t.vertex_count
+    assert check["max_depth_ratio"] == pytest.approx(0.2501 / 0.25, rel=1e-6)
+
+
+def test_outward_rays_use_their_own_facing(variant):
+    """A vertex at the origin (n = +z) displaced +0.5: the +n ray meets a steep roof 0.3
+    above at a grazing angle (cos 0.087 < GRAZING_COS: a crease, not a crossing), the -n ray
+    a floor head-on.  The outward vertex is judged by its own (+n) ray: no crossing; moved
+    -0.5 instead it passes through the floor 0.4 below (ratio 0.5 / 0.4)."""
+    from mi_displace.core.thickness import crossing_warning
+
+    a = np.radians(5.0)
+    up = np.array([np.sin(a), 0, np.cos(a)])          # the roof rises 5 degrees off vertical
+    mid = np.array([[0, 1, 0.3], [0, -1, 0.3]])       # the roof's middle line, over the origin
+    roof = [*(mid - up), *(mid[::-1] + up)]
+    floor = [[-1, -1, -0.4], [1, -1, -0.4], [1, 1, -0.4], [-1, 1, -0.4]]
+    pos = np.array(roof + floor, np.float64)
+    faces = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+
+    def vertex(d):
+        p = mi.Point3f([0.0], [0.0], [0.0])
+        return tessellate.Tessellation(p, mi.Vector3f([0], [0], [1]), mi.Point2f([0], [0]),
+                                       mi.Vector3u([0], [0], [0]), p, mi.Vector3f([0], [0], [1]),
+                                       mi.Float([d]))
+
+    from mi_displace.core.thickness import cast_crossing_rays
+
+    rays = cast_crossing_rays(vertex(0.5), (pos, faces))
+    assert np.asarray(rays.gap[0])[0] == pytest.approx(0.3, abs=1e-4)      # the roof is met
+    assert abs(np.asarray(rays.facing[0])[0]) == pytest.approx(np.sin(a), abs=1e-4)
+    assert abs(np.asarray(rays.facing[1])[0]) == pytest.approx(1.0, abs=1e-6)   # the floor
+    assert crossing_check(vertex(0.5), base_mesh=(pos, faces))["crossing_vertices"] == 0
+    down = crossing_check(vertex(-0.5), base_mesh=(pos, faces))
+    assert down["crossing_vertices"] == 1
+    assert down["max_depth_ratio"] == pytest.approx(0.5 / 0.4, rel=1e-3)
+    assert crossing_warning("displaced 'x'", down) == (
+        "displaced 'x': displacement deeper than the local thickness of the base at 1 of 1 "
+        "vertices (up to 1.25x the distance to the base's other side): the displaced surface "
+        "passes through the base and the reference is wrong there; lower 'scale' or raise "
+        "'midlevel'")
+
+
+def test_crossing_rays_report_the_uv_of_what_they_hit(variant):
+    """With base UVs the rays carry the texture coordinates of the hit: from the outer wall
+    of a thin spherical shell (both walls with the same spherical UVs) the -n ray meets the
+    inner wall at (nearly) the vertex's own (u, v)."""
+    import trimesh
+
+    from mi_displace.core.thickness import cast_crossing_rays
+
+    ico = trimesh.creation.icosphere(3)
+    v = ico.vertices / np.linalg.norm(ico.vertices, axis=1, keepdims=True)
+    uv = np.stack([np.arctan2(v[:, 1], v[:, 0]) / (2 * np.pi) + 0.5,
+                   np.arccos(np.clip(v[:, 2], -1, 1)) / np.pi], 1)
+    n = len(v)
+    pos = np.concatenate([v, 0.985 * v])
+    faces = np.concatenate([ico.faces, ico.faces[:, ::-1] + n])
+    t = tessellate.displace_mesh(v, v, uv, ico.faces, None, 0.0, 0.0, 1)
+    rays = cast_crossing_rays(t, (pos, faces, np.concatenate([uv, uv])))
+    hit = np.asarray(rays.uv[1]).T
+    own = np.asarray(t.texcoords).T
+    away = (np.abs(own[:, 0] - 0.5) < 0.4) & (np.abs(own[:, 1] - 0.5) < 0.35)   # seam, poles
+    assert away.sum() > 100
+    err = np.abs(hit[away] - own[away]).max(1)
+    assert np.mean(err < 2e-3) > 0.95       # (a few hit a face spanning the u seam)

@@ -185,3 +185,92 @@ def test_clamped_count_wraps_on_periodic_axes(variant):
     v = mi.Float([0.3] * 6)
     assert maps.clamped_count(u, v) == 5     # 0.96 rounds to texel 10 = 0 as well
     assert maps.clamped_count(u, v) == int((~maps.texel_valid(np.asarray(u), np.asarray(v))).sum())
+
+
+def test_clamped_count_on_open_axes_takes_the_nearest_texel(variant):
+    """Open axes: texel i holds u = i / (r - 1); a point is clamped when its nearest texel
+    (round(u (r - 1))) is invalid — texel_valid (NumPy) and clamped_count (Dr.Jit) agree
+    with that rule, at both ends of the axis too."""
+    maps = base_maps.build_maps(make_base("plane"), 11)
+    maps.valid[:, 3] = False                 # column u = 0.3
+    maps.valid[:, 10] = False                # the last column, u = 1
+    u = np.array([0.3, 0.26, 0.34, 0.24, 0.36, 0.5, 0.96, 1.0, 1.5, 0.0])
+    v = np.full(len(u), 0.5)
+    expect = [True, True, True, False, False, False, True, True, True, False]
+    assert np.array_equal(~maps.texel_valid(u, v), expect)
+    assert maps.clamped_count(mi.Float(u), mi.Float(v)) == sum(expect)
+
+
+def test_map_error_skips_every_lookup_that_touches_an_invalid_texel(variant):
+    """A texel column marked invalid and filled with garbage (z + 10): map_error must not
+    see it (it skips points whose four lookup texels are not all valid), so the error is at
+    most that of the intact maps; a lookup that read it would err by about 10."""
+    base = make_base("torus")
+    maps = base_maps.build_maps(base, 32)
+    intact = base_maps.map_error(base, maps, 0.1, samples=1 << 14)
+    p = _np(maps.position).copy()
+    column = np.arange(32) * 32 + 5          # texels (i = 5, every row j), row-major
+    p[column, 2] += 10.0
+    maps.position = mi.Vector3f(*(mi.Float(p[:, k].astype(np.float32)) for k in range(3)))
+    maps.valid[:, 5] = False
+    assert intact < 0.1
+    assert base_maps.map_error(base, maps, 0.1, samples=1 << 14) <= intact + 1e-6
+
+
+def test_geometry_image_bytes_and_resolution_halving_gives_an_int(variant):
+    """nbytes: two RGB float32 maps and a 1-byte validity bitmap per texel (§3.1);
+    choose_resolution halves a resolution that meets the tolerance while its half does too
+    and returns a power of two as an int (an error model e = 1e-2 (32 / R)^2 of the
+    diagonal, from R = 512: 128 is the smallest R with e <= 7e-4)."""
+    base = make_base("plane")
+    maps = base_maps.build_maps(base, 16, 8)
+    assert maps.nbytes == 16 * 8 * (2 * 3 * 4 + 1) and type(maps.nbytes) is int
+    base = make_base("torus")
+    diagonal = base_maps.base_sample_diagonal(base)
+    r, trials = base_maps.choose_resolution(
+        base, 7e-4, 0.1, start=512, build=lambda r: r,
+        error=lambda base, r, w: diagonal * 1e-2 * (32 / r) ** 2)
+    assert r == 128 and type(r) is int
+    assert [t[0] for t in trials] == [64, 128, 256, 512]
+
+
+def test_diffusion_takes_the_first_texel_as_a_source():
+    """Texel 0 (flat index 0) is a valid source like any other: with only the two corners
+    valid, every texel nearer to (0, 0) takes texel 0."""
+    valid = np.zeros((9, 9), bool)
+    valid[0, 0] = valid[8, 8] = True
+    src, _ = base_maps.diffuse_fill(valid, False, False)
+    yy, xx = np.mgrid[0:9, 0:9]
+    near = yy + xx < 6
+    assert np.all(src[near] == 0) and np.all(src[yy + xx > 10] == 80)
+
+
+def test_prune_reads_the_tile_footprint_in_v(variant):
+    """A tile covering only the upper part of its cell (y in [0.6, 1]) over maps whose rows
+    v >= 0.5 are invalid is pruned; with only rows v >= 0.7 invalid it keeps the valid
+    texels at v = 0.5, 0.6 inside its footprint grown by one texel."""
+    layout = make_layout("rect", 1, 1)
+    bounds = np.array([[0.0, 0.6, 1.0, 1.0]])
+    maps = base_maps.build_maps(make_base("plane"), 11)
+    maps.valid[5:, :] = False
+    assert base_maps.prune(layout, bounds, maps)[1] == 1
+    maps.valid[:] = True
+    maps.valid[7:, :] = False
+    kept, pruned = base_maps.prune(layout, bounds, maps)
+    assert pruned == 0 and kept.count == 1
+
+
+def test_prune_grows_the_footprint_by_one_texel_and_auto_starts_at_a_power_of_two(variant):
+    """prune: a tile over y in [0, 0.3] reads rows up to 0.3 (r - 1) + 1 = row 4 of an
+    11-row map: pruned when rows 0..4 are invalid although row 5 is valid.
+    choose_resolution from its default start: with an error model met by R = 32 and not by
+    16 the answer is 32 (a power of two)."""
+    layout = make_layout("rect", 1, 1)
+    maps = base_maps.build_maps(make_base("plane"), 11)
+    maps.valid[:5, :] = False
+    assert base_maps.prune(layout, np.array([[0.0, 0.0, 1.0, 0.3]]), maps)[1] == 1
+    base = make_base("torus")
+    diagonal = base_maps.base_sample_diagonal(base)
+    r, _ = base_maps.choose_resolution(base, 1.5e-2, 0.1, build=lambda r: r,
+                                       error=lambda base, r, w: diagonal * 1e-2 * (32 / r) ** 2)
+    assert r == 32

@@ -3,13 +3,16 @@
 The base is scenes/parts/ddm_genus1/genus1.obj: a lumpy torus unwrapped by xatlas into 13
 charts (made by make_genus1.py next to it)."""
 from pathlib import Path
+from types import SimpleNamespace
 
 import mitsuba as mi
 import numpy as np
 import pytest
 import trimesh
+from ddm_helpers import spherical_cap
 
 from mi_displace.core.mesh_io import load_uv_mesh
+from mi_displace.ddm import charts
 from mi_displace.ddm.model import DDMConfig, DDMModel, make_base
 from mi_displace.evaluate.metrics import point_mesh_distance
 
@@ -125,3 +128,71 @@ def test_chart_border_drop_removes_the_straddling_tiles(variant):
     assert keep["charts"] == 13
     with pytest.raises(Exception, match="chart_border"):
         mi.load_dict({**kw, "chart_border": "glue"})
+
+
+def test_tile_reach_is_the_cell_or_the_overhang():
+    """tile_reach: how far (uv) a tile's vertices reach from its cell origin — the cell itself
+    (max(su, sv)) for a tile inside [0, 1]^2 wherever it sits, the overhang beyond it else."""
+    inside = SimpleNamespace(positions=np.array([[0.2, 0.3, 0.0], [0.8, 0.7, 0.1]]))
+    over = SimpleNamespace(positions=np.array([[-0.5, 0.1, 0.0], [1.2, 0.9, 0.1]]))
+    assert charts.tile_reach([inside], (0.1, 0.25)) == pytest.approx(0.25)
+    assert charts.tile_reach([over], (0.1, 0.05)) == pytest.approx(0.1 * 1.7)
+    assert charts.tile_reach([inside, over], (0.1, 0.25)) == pytest.approx(0.25)
+
+
+def test_chart_maps_bytes_and_stats_and_pruned_count(variant):
+    """ChartMaps stores two RGB float32 maps and a validity byte per window texel and five
+    int32 per chart; its stats count its texels and those off their chart; assign_charts
+    prunes exactly the tiles it does not keep (clamp mode keeps straddling tiles)."""
+    from mi_displace.ddm.layout import make_layout
+    from mi_displace.ddm.tiles import get_tile
+
+    from mi_displace.ddm.model import make_base as make_ddm_base
+
+    base = make_ddm_base("mesh", GENUS1)
+    maps = charts.ChartMaps(base, 32, 0.02)
+    g = maps.grid
+    texels = int(np.sum(g.width * g.height))
+    assert maps.nbytes == texels * (2 * 3 * 4 + 1) + base.chart_count * 5 * 4
+    assert maps.stats["map_texels"] == texels == len(maps.valid)
+    assert maps.stats["clamped_texels"] == int((~maps.valid).sum()) > 0
+    assert maps.stats["charts"] == base.chart_count
+    layout = make_layout("rect", 12, 12)
+    kept, stats = charts.assign_charts(layout, [get_tile("thorn")], base)
+    assert 0 < stats["tiles_pruned"] == layout.count - kept.count
+    assert stats["tiles_dropped"] == 0 and stats["charts"] == base.chart_count
+    dropped, s2 = charts.assign_charts(layout, [get_tile("thorn")], base, "drop")
+    assert s2["tiles_dropped"] == s2["tiles_straddling"] == kept.count - dropped.count > 0
+
+
+def test_chart_maps_lookup_reproduces_every_stored_texel(variant):
+    """Bilinear interpolation through the texels: a lookup at a texel's own (u, v) in its
+    chart returns that texel's P and N — the last row and column of every window too."""
+    from mi_displace.ddm.model import make_base as make_ddm_base
+
+    maps = charts.ChartMaps(make_ddm_base("mesh", GENUS1), 16, 0.02)
+    g = maps.grid
+    chart = mi.UInt32(g.chart_of.astype(np.uint32))
+    p, n = maps.lookup(mi.Float(g.u.astype(np.float32)), mi.Float(g.v.astype(np.float32)),
+                       False, chart)
+    assert np.allclose(_np(p), _np(maps.position), atol=1e-5)
+    assert np.allclose(_np(n), _np(maps.normal), atol=1e-5)
+
+
+def test_chart_map_error_is_zero_on_a_flat_mesh_and_falls_with_resolution(variant):
+    """charts.map_error: per-chart bilinear maps of a flat mesh are exact (error ~ 0, normal
+    offset included); on a sphere cap (a piecewise-linear mesh: creases make the order about
+    1, docs/ddm.md) it is positive and falls with the resolution."""
+    from mi_displace.ddm.mesh_base import MeshBase
+
+    flat = MeshBase(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]]),
+                    np.tile([0, 0, 1.0], (4, 1)),
+                    np.array([[0.1, 0.1], [0.9, 0.1], [0.9, 0.9], [0.1, 0.9]]),
+                    np.array([[0, 1, 2], [0, 2, 3]]))
+    maps = charts.ChartMaps(flat, 16, 0.0)
+    assert "map_build_s" in maps.stats and maps.stats["map_build_s"] >= 0
+    assert charts.map_error(flat, maps, 0.3, samples=4096) < 1e-5
+    cap = MeshBase(*spherical_cap(2.0))
+    e16, e32 = (charts.map_error(cap, charts.ChartMaps(cap, r, 0.0), 0.0, samples=4096)
+                for r in (16, 32))
+    assert 0 < e32 < e16 / 1.5

@@ -61,3 +61,44 @@ def test_bad_layout_parameters(kwargs, match):
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
         make_layout(**args)
+
+
+def test_one_cell_layout_and_one_entry_pattern():
+    lay = make_layout("rect", 1, 1)
+    assert lay.count == 1 and lay.size == (1.0, 1.0) and lay.offsets.tolist() == [[0.0, 0.0]]
+    alt = make_layout("alternate", 3, 2, n_tiles=2, pattern=[[1]])
+    assert alt.tile_index.tolist() == [1] * 6
+
+
+def test_hex_rows_alternate_their_shift_and_gaps_shrink_hexagons():
+    """Row j of a hex layout is shifted by half a cell when j is odd (every row, not only
+    row 1); gaps shrink each hexagon inside its cell, centred: su = cu (1 - gap_u),
+    sv = (4/3) cv (1 - gap_v), the cell's centre kept."""
+    n, m, gu, gv = 5, 6, 0.2, 0.1
+    lay = make_layout("hex", n, m, gap_u=gu, gap_v=gv)
+    cu, cv = 1 / n, 1 / m
+    su, sv = lay.size
+    assert su == pytest.approx(cu * (1 - gu)) and sv == pytest.approx(cv * 4 / 3 * (1 - gv))
+    o = lay.offsets.reshape(m, n, 2)
+    for j in range(m):
+        centre_u = (np.arange(n) + 0.5 + 0.5 * (j % 2)) * cu
+        assert np.allclose(o[j, :, 0] + su / 2, centre_u), j
+        assert np.allclose(o[j, :, 1] + sv / 2, (j + 0.5) * cv), j
+
+
+def test_layout_messages_and_the_default_seed():
+    """The messages name the parameter whole; ``random`` draws with seed 0 by default (the
+    documented default of ``seed``)."""
+    import re
+
+    for name in ("u0", "v0"):
+        with pytest.raises(ValueError, match=f"^ddm: '{name}' must be finite, got nan$"):
+            make_layout("rect", 2, 2, **{name: float("nan")})
+    with pytest.raises(ValueError, match="'tiles_v'"):
+        make_layout("rect", 2, 0)
+    with pytest.raises(ValueError, match="^" + re.escape(
+            "ddm: 'pattern' must be rows of tile indices in 0..1") + "$"):
+        make_layout("alternate", 2, 2, n_tiles=2, pattern=[[0, 2]])
+    a = make_layout("random", 8, 8, n_tiles=3)
+    assert np.array_equal(a.tile_index, make_layout("random", 8, 8, n_tiles=3, seed=0).tile_index)
+    assert not np.array_equal(a.tile_index, make_layout("random", 8, 8, n_tiles=3, seed=1).tile_index)

@@ -4,6 +4,7 @@ import warnings
 
 import numpy as np
 import pytest
+from ddm_helpers import spherical_cap
 
 from mi_displace.core import tessellate
 from mi_displace.ddm import mapping
@@ -343,3 +344,74 @@ def test_normal_methods_on_an_affine_map(variant):
     with pytest.raises(ValueError, match=r"^ddm: unknown 'normals' 'bent'; expected one of "
                                          r"tangent, jacobian, naive$"):
         m.map(method="bent")
+
+
+def test_model_size_check_for_one_column_and_no_refit_without_auto(variant):
+    """A single column of 2^40 cells is refused by the cell-count bound, before any layout
+    array is allocated (8 TiB); a model with a given map_resolution does not change its
+    maps for sensors (fit_to_sensors: True only when the maps changed)."""
+    import warnings
+
+    from mi_displace.ddm.model import DDMConfig, DDMModel
+
+    with pytest.raises(ValueError, match="tiles_u"):
+        DDMModel(DDMConfig(base="sphere", tile="thorn", tiles_u=1, tiles_v=2 ** 40))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = DDMModel(DDMConfig(base="sphere", tile="stone:1", tiles_u=4, tiles_v=4,
+                               map_resolution=16))
+    maps = m.maps
+    assert m.fit_to_sensors([], None) is False and m.maps is maps
+
+
+def test_model_w_max_rule_and_memory_ratio(variant):
+    """_w_max is the largest |w| of the mapped tiles (exact mode on the plane: the mapped z),
+    an offset below the surface included; the rule of a given map_resolution is "given";
+    mesh_over_hddm is the ratio of the two byte counts; an unknown base is named."""
+    import warnings
+
+    from mi_displace.ddm.model import DDMConfig, DDMModel
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = DDMModel(DDMConfig(base="plane", tile="thorn", tiles_u=2, tiles_v=2, height=0.1,
+                               w_offset=-0.5, mode="exact"))
+        maps = DDMModel(DDMConfig(base="sphere", tile="stone:1", tiles_u=4, tiles_v=4,
+                                  map_resolution=16))
+    p, _, _ = m.map()
+    assert m._w_max() == pytest.approx(np.abs(np.asarray(p.z)).max(), rel=1e-5)
+    assert maps.resolution_rule == "given" and maps.stats()["map_resolution_rule"] == "given"
+    r = maps.memory_report()
+    assert r["mesh_over_hddm"] == pytest.approx(r["mesh_bytes"] / r["hddm_bytes"])
+    with pytest.raises(ValueError, match=r"^ddm: unknown 'base' 'cube'; expected one of .* or 'mesh'$"):
+        DDMConfig(base="cube").check()
+
+
+def test_model_stats_clamped_mask_and_fold_message(variant):
+    """An exact-mode model prunes nothing (tiles_pruned 0); on a mesh base (a sphere cap
+    with a disc-shaped UV layout) a mapped vertex is clamped exactly when its uv lies off the
+    layout (the disc of radius ~0.47 about (0.5, 0.5)); the fold warning of an analytic base
+    counts "sampled points of the base"."""
+    import warnings
+
+    from mi_displace.ddm.mesh_base import MeshBase
+    from mi_displace.ddm.model import DDMConfig, DDMModel, FoldingWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = DDMModel(DDMConfig(base="mesh", tile="stone:1", tiles_u=6, tiles_v=6, height=0.05,
+                               mode="exact"), base=MeshBase(*spherical_cap(2.0)))
+    assert m.stats()["tiles_pruned"] == m.pruned
+    _, _, uv = m.map()
+    clamped = m.clamped_mask(uv)
+    radius = np.hypot(np.asarray(uv.x) - 0.5, np.asarray(uv.y) - 0.5)
+    assert clamped.shape == radius.shape and clamped.any() and not clamped.all()
+    assert not clamped[radius < 0.44].any() and clamped[radius > 0.48].all()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        exact = DDMModel(DDMConfig(base="sphere", tile="stone:1", tiles_u=4, tiles_v=4,
+                                   mode="exact"))
+    assert exact.stats()["tiles_pruned"] == 0
+    with pytest.warns(FoldingWarning, match=r" of [0-9,]+ sampled points of the base \(det"):
+        DDMModel(DDMConfig(base="sphere", tile="thorn", tiles_u=4, tiles_v=4, height=-4.0,
+                           mode="exact"))

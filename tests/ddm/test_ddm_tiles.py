@@ -102,3 +102,64 @@ def test_bad_tile_names_and_files():
         tiles.get_tile("thorn:3")
     with pytest.raises(FileNotFoundError, match="missing.obj"):
         tiles.get_tile("/nowhere/missing.obj")
+
+
+@pytest.mark.parametrize("normal_axis,long_axis", [(2, 0), (1, 0), (0, 2)])
+def test_stadium_is_a_closed_curve_of_evenly_spaced_distinct_points(normal_axis, long_axis):
+    """The chain's links: n points at equal arc-length steps around a stadium (a segment of
+    half length L along long_axis, swept by radius r in the plane normal to normal_axis,
+    centred at ``center``): every point at distance r from the segment, in the plane, and
+    the closing step as long as the others (no point repeated)."""
+    center, half, r, n = np.array([0.5, 0.4, 0.12]), 0.22, 0.12, 32
+    pts = tiles._stadium(center, half, r, normal_axis, long_axis, n)
+    assert pts.shape == (n, 3)
+    assert np.allclose(pts[:, normal_axis], center[normal_axis])
+    other = 3 - normal_axis - long_axis
+    x = pts[:, long_axis] - center[long_axis]
+    y = pts[:, other] - center[other]
+    dist = np.hypot(x - np.clip(x, -half, half), y)       # distance to the segment
+    assert np.allclose(dist, r, atol=1e-12)
+    step = np.linalg.norm(np.roll(pts, -1, 0) - pts, axis=1)
+    perimeter = 4 * half + 2 * np.pi * r
+    assert step.min() > 0.9 * perimeter / n and step.max() <= perimeter / n + 1e-12
+
+
+def test_chain_links_have_their_stated_sizes():
+    """chain(): a flat link (half length 0.22, radius 0.12, in the plane z = 0.12) and a
+    standing one (0.1, 0.1, in y = 0.5, centred at x = 1), both tubes of radius 0.04: the
+    tile's bounding box is theirs (the polygonal tubes lie inside it, by less than the
+    sagitta of 8 sides and 16 path points)."""
+    p = tiles.chain().positions
+    box_lo = [0.5 - 0.22 - 0.12 - 0.04, 0.5 - 0.12 - 0.04, 0.12 - 0.1 - 0.04]
+    box_hi = [1.0 + 0.1 + 0.1 + 0.04, 0.5 + 0.12 + 0.04, 0.12 + 0.1 + 0.04]
+    assert np.all(p.min(0) >= np.array(box_lo) - 1e-6) and np.all(p.max(0) <= np.array(box_hi) + 1e-6)
+    assert np.allclose(p.min(0), box_lo, atol=6e-3) and np.allclose(p.max(0), box_hi, atol=6e-3)
+
+
+def test_plate_is_an_n_by_n_grid_over_the_unit_square():
+    """plate(n): (n + 1)^2 vertices, 2 n^2 triangles facing +z, every vertex used, covering
+    [0, 1]^2 once (total area 1)."""
+    p, f = tiles.plate(4)
+    assert p.shape == (25, 3) and f.shape == (32, 3)
+    assert f.max() == 24 and len(np.unique(f)) == 25
+    cross = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])
+    assert np.all(cross[:, 2] > 0) and 0.5 * cross[:, 2].sum() == pytest.approx(1.0)
+
+
+def test_hexagon_covers_its_hexagon_once_and_zero_normals_become_up(tmp_path):
+    """hexagon(): a height field whose faces all face up and cover the regular hexagon
+    inscribed in [0, 1]^2 exactly once (area 3/4 of the square: (3 sqrt 3 / 2) / (2 sqrt 3));
+    make_tile: a vanishing given normal becomes +z; a file of another suffix is refused by
+    name."""
+    t = tiles.hexagon()
+    p, f = t.positions.astype(np.float64), t.faces.astype(np.int64)
+    a, b = p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]]
+    signed = 0.5 * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+    assert np.all(signed > 0) and signed.sum() == pytest.approx(0.75, rel=1e-5)
+    tri = tiles.make_tile("t", [[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]],
+                           normals=[[0, 0, 0], [0, 0, 2.0], [1e-13, 0, 0]])
+    assert np.array_equal(tri.normals, [[0, 0, 1], [0, 0, 1], [0, 0, 1]])
+    bad = tmp_path / "tile.txt"
+    bad.write_text("x")
+    with pytest.raises(ValueError, match=r"^ddm: tile file '.*tile\.txt' must be \.obj or \.ply$"):
+        tiles.load_tile_file(bad)

@@ -15,8 +15,9 @@ SPHERE = {"type": "sphere", "radius": R, "center": S0.tolist(),
 
 
 @pytest.fixture
-def sphere_images(variant):
-    return dobj.capture(SPHERE, 96, center=[0, 0, 0], half=1.0)
+def sphere_images(variant, built_once):
+    """SPHERE captured at 96 x 96 in the cube [-1, 1]^3, once per run (read only)."""
+    return built_once("sphere_images", lambda: dobj.capture(SPHERE, 96, center=[0, 0, 0], half=1.0))
 
 
 def test_capture_is_the_analytic_sphere_depth(sphere_images):
@@ -209,3 +210,69 @@ def test_empty_space_skipping_changes_nothing(sphere_images, hull):
     found_all, p_all = run_find(obj, o, d)
     assert found.sum() > 100 and np.array_equal(found, found_all)
     assert np.array_equal(p[found], p_all[found])
+
+
+def _sphere_images():
+    """The sphere of ``sphere_images`` captured at 32 x 32."""
+    return dobj.capture(SPHERE, 32, center=[0, 0, 0], half=1.0)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_skip_leaves_an_empty_cell_a_hair_before_its_far_face(variant, sign):
+    # DepthObject.skip: from a point in an empty grid cell (the cube's corner, far from the
+    # sphere), skip(t) is where the ray leaves that cell, a hair short of it
+    obj = dobj.DepthObject(_sphere_images(), 40)
+    size = 2.0 / dobj.GRID
+    o = np.float32([-0.97, -0.97, -0.97]) * -sign          # inside corner cell (0, 0, 0) or the last
+    d = np.float32([1.0, 0.3, 0.2]) * sign
+    d /= np.linalg.norm(d)
+    cell = np.floor((o + 1) / size)
+    assert not np.array(obj.occupancy).reshape((dobj.GRID,) * 3)[tuple(cell.astype(int))]
+    skip = obj.skip(mi.Point3f(*map(float, o)), mi.Vector3f(*map(float, d)))
+    t = float(np.array(skip(mi.Float(0.0)))[0])
+    assert t > 0
+    assert np.array_equal(np.floor((o + t * d + 1) / size), cell)                  # still inside
+    assert not np.array_equal(np.floor((o + (t + 2e-4 * size) * d + 1) / size), cell)  # then out
+
+
+def test_images_of_different_sizes_are_named_in_the_message(variant, tmp_path):
+    from mi_displace.core.io import write_exr, write_png
+
+    path = dobj.write(_sphere_images(), tmp_path / "s")
+    write_exr(tmp_path / "s" / "depth_pz.exr", np.ones((16, 16, 3), np.float32))
+    write_png(tmp_path / "s" / "color_pz.png", np.zeros((16, 16, 3), np.float32))
+    with pytest.raises(ValueError) as e:
+        dobj.read(path)
+    sizes = ", ".join(f"{n}: {16 if n == 'pz' else 32}x{16 if n == 'pz' else 32}" for n in dobj.FACE_NAMES)
+    assert str(e.value) == f"depth object: the six images of {str(path)!r} differ in size ({sizes})"
+
+
+def test_default_cube_holds_the_object_with_its_margin(variant, tmp_path):
+    # capture(): without center/half the cube is the bounding box, `margin` x larger: a
+    # sphere of radius 0.3 at c gets half = 0.306 and its nearest point lies 0.006 deep
+    c = np.array([0.2, -0.1, 0.4])
+    img = dobj.capture({"type": "sphere", "radius": 0.3, "center": c.tolist()}, 48)
+    assert np.allclose(img.center, c, atol=1e-5) and img.half == pytest.approx(0.306, rel=1e-4)
+    hit = np.isfinite(img.depth)
+    assert img.depth[hit].min() == pytest.approx(0.006, abs=2e-3) and img.depth[hit].min() > 0
+    # alpha: 1 at the nearest point, 0 where nothing was hit (whatever the cube size)
+    a = img.alpha()
+    assert a[~hit].max() == 0 and a[hit].max() == pytest.approx(1 - 0.006 / 0.612, abs=3e-3)
+    big = dobj.capture({"type": "sphere", "radius": 0.3, "center": c.tolist()}, 16, center=c, half=2.0)
+    assert big.alpha()[~np.isfinite(big.depth)].max() == 0 and big.alpha().max() > 0.5
+    meta = json.loads(dobj.write(img, tmp_path / "s").read_text())
+    assert meta["resolution"] == 48 and meta["half_size"] == img.half
+
+
+def test_without_normal_images_the_best_facing_cube_face_is_the_normal(variant):
+    img = _sphere_images()
+    img = dobj.DepthImages(img.center, img.half, img.depth, img.color, None)
+    obj = dobj.DepthObject(img, 20)
+    d = np.float32([[0.2, 0.3, -0.9], [0.9, 0.3, 0.2], [0.3, -0.9, 0.2], [0.5, 0.2, 0.9], [-0.2, 0.6, 0.5]])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    n = obj.normal(mi.Point3f(0.0, 0.0, 0.0), mi.Vector3f(*(mi.Float(d[:, k]) for k in range(3))))
+    got = np.stack([np.array(c) for c in n], 1)
+    k = np.abs(d).argmax(1)
+    want = np.zeros_like(d)
+    want[np.arange(len(d)), k] = -np.sign(d[np.arange(len(d)), k])
+    assert np.array_equal(got, want)

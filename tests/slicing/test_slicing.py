@@ -321,3 +321,65 @@ def test_raster_sees_through_stacked_volumes(variant, helpers, visibility):
     img = np.array(mi.render(floor_scene(5)))
     assert np.all(np.isfinite(img))
     assert np.abs(img - bare).max() < 1e-4
+
+
+@pytest.mark.parametrize("n", [1, 5])
+def test_a_plane_base_is_boxed_by_twelve_wall_triangles(variant, n):
+    # the unit-square base (two triangles): its displacement volume is a box, top and bottom
+    # two triangles each and a quad on each of the four open edges; n aligned slices are n
+    # copies of the base
+    bm = geo.make_base_mesh("plane", {}, None, 1, np.eye(4))
+    assert len(bm.faces) == 2 and len(geo.boundary_edges(bm)) == 4
+    vol = SlicedVolume(bm, mi.load_dict({"type": "uniform", "value": 0.5}), 0.2, n, "a", "basic")
+    assert vol.stats["wall_triangles"] == 12 and vol.walls_scene.triangles == 12
+    assert vol.stats["slice_triangles"] == 2 * n and vol.stats["base_faces"] == 2
+    walls = geo.volume_walls(bm, 0.2)
+    z = walls.positions[:, 2]
+    assert z.min() < 0 < 0.2 < z.max() < 0.2 * 1.01     # -eps below, 1 + eps above (h x scale)
+
+
+@pytest.mark.parametrize("name,params", [("plane", {}), ("sphere", {"radius": 0.8}),
+                                         ("cylinder", {"radius": 0.5, "length": 1.5}),
+                                         ("torus", {"major_radius": 1.0, "minor_radius": 0.3})])
+def test_base_coordinates_invert_the_parametrisation(variant, name, params):
+    # p = S(u, v) + h n(u, v): base_coordinates gives back (u, v, h), inside the domain;
+    # beyond a bounded domain's edge it says so
+    from mi_displace.core import surfaces
+
+    base = surfaces.make_base(name, **params)
+    rng = np.random.default_rng(3)
+    u, v = rng.uniform(0.05, 0.95, 500), rng.uniform(0.05, 0.95, 500)
+    h = rng.uniform(-0.1, 0.1, 500)
+    s = base.sample(mi.Float(u), mi.Float(v))
+    p = s.p + dr.normalize(s.n) * mi.Float(h)
+    bu, bv, bh, ok = geo.base_coordinates(base, mi.Point3f(p))
+    assert np.array(ok).all()
+    for got, want in ((bu, u), (bv, v), (bh, h)):
+        np.testing.assert_allclose(np.array(got), want, atol=2e-5)
+    if name in ("plane", "cylinder"):
+        out = base.sample(mi.Float([0.5, 0.5]), mi.Float([1.4, -0.4])).p   # v beyond [0, 1]
+        assert not np.array(geo.base_coordinates(base, mi.Point3f(out))[3]).any()
+    if name == "plane":
+        out = base.sample(mi.Float([1.3, -0.3]), mi.Float([0.5, 0.5])).p   # u beyond [0, 1]
+        assert not np.array(geo.base_coordinates(base, mi.Point3f(out))[3]).any()
+
+
+def test_base_tangents_are_dS_du_and_dS_dv(variant):
+    # the plane base S(u, v) = (2u - 1, 2v - 1, 0), placed by diag(2, 3, 1): dS/du = (4, 0, 0)
+    # and dS/dv = (0, 6, 0) at every vertex (the per-face values are exact on an affine map)
+    bm = geo.make_base_mesh("plane", {}, None, 4, np.diag([2.0, 3.0, 1.0, 1.0]))
+    assert len(bm.positions) > 9
+    assert np.allclose(bm.su, [4, 0, 0], atol=1e-9) and np.allclose(bm.sv, [0, 6, 0], atol=1e-9)
+    assert np.allclose(bm.normals, [0, 0, 1])
+
+
+def test_projected_size_through_a_thin_lens_is_the_pinhole_one(variant):
+    # a thin-lens camera focused on the object projects a point like the pinhole at the lens
+    # centre: 0.1 world units at distance 3, 64 pixels over 40 degrees: 0.1 / (2 * 3 tan 20) * 64
+    to_world = mi.ScalarTransform4f().look_at(origin=[0, 0, 3], target=[0, 0, 0], up=[0, 1, 0])
+    film = {"type": "hdrfilm", "width": 64, "height": 64}
+    bbox = (np.array([-0.1, -0.1, -0.1]), np.array([0.1, 0.1, 0.1]))
+    want = 0.1 / (2 * 2.9 * np.tan(np.radians(20))) * 64          # the box's nearest point: z = 0.1
+    for extra in ({"type": "perspective"}, {"type": "thinlens", "aperture_radius": 0.2, "focus_distance": 2.9}):
+        cam = mi.load_dict({**extra, "fov": 40, "film": film, "to_world": to_world})
+        assert geo.projected_size(cam, bbox, 0.1) == pytest.approx(want, rel=1e-3), extra["type"]

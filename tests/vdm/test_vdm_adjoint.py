@@ -2,14 +2,8 @@
 as closely as on true displacement of the same relief (the control)."""
 import mitsuba as mi
 import numpy as np
-import pytest
 
 MAT = {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.6}}
-
-
-@pytest.fixture(autouse=True)
-def _cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
 
 
 def _height():

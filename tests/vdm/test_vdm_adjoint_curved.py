@@ -19,11 +19,6 @@ LIGHTS = {
 }
 
 
-@pytest.fixture(autouse=True)
-def _cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
-
-
 def _scene(kind, integrator, light, res, max_depth=2):
     height = {"type": "cells", "cells": 2, "radius": 0.45,
               "to_uv": mi.ScalarTransform4f().scale([4, 2, 1])}

@@ -8,11 +8,6 @@ import pytest
 from mi_displace.vdm import auto
 
 
-@pytest.fixture(autouse=True)
-def _cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
-
-
 def _sensor(width, distance=4.0, fov=30.0):
     return mi.load_dict({"type": "perspective", "fov": fov, "to_world": mi.ScalarTransform4f().look_at(
         origin=[0, -distance, 0], target=[0, 0, 0], up=[0, 0, 1]),

@@ -10,11 +10,6 @@ import pytest
 from mi_displace.vdm import build, table
 
 
-@pytest.fixture(autouse=True)
-def _cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
-
-
 def test_spec_defaults_are_the_plugin_defaults(variant):
     """VDMSpec() (the library's entry point) builds what the vdm plugin builds by default."""
     bsdf = mi.load_dict({"type": "vdm", "height": {"type": "cells"}})

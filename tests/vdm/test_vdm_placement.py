@@ -14,11 +14,6 @@ def _place():
     return T4().translate([0.3, -0.2, 0.1]).rotate([0.6, 0.8, 0], 40).scale(1.5)
 
 
-@pytest.fixture(autouse=True)
-def _cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
-
-
 def _torus(kind, **kw):
     height = {"type": "cells", "cells": 2, "radius": 0.45, "to_uv": T4().scale([6, 2, 1])}
     bsdf = {"type": kind, "height": height, "depth": 0.06, "tiling_u": 6, "tiling_v": 2}

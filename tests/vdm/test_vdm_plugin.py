@@ -10,11 +10,6 @@ SMALL = {"res": 32, "theta": 8, "phi": 16, "curvatures": 4}
 MAT = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.5, 0.4]}}
 
 
-@pytest.fixture(autouse=True)
-def _cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
-
-
 def _height(cells=2, periods=(1, 1)):
     """Cells with ``periods`` (u, v) texture periods per unit uv: one VDM tile = one period,
     so ``tiling_u``/``tiling_v`` must equal them."""

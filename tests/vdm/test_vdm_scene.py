@@ -9,11 +9,6 @@ SCENE = "scenes/vdm_torus.xml"
 SMALL = {"res": "48", "resolution": "384", "vdm_res": "32", "coarse": "48"}
 
 
-@pytest.fixture(autouse=True)
-def _cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
-
-
 @pytest.mark.parametrize("mode", ["reference", "approximation", "bump", "horizon", "relief", "base"])
 def test_every_mode_loads_and_renders(variant, mode):
     scene, timings = scenes.load(SCENE, **methods.params_for(mode, SMALL), mode=mode,

@@ -13,11 +13,6 @@ import pytest
 SMALL = {"res": 16, "theta": 4, "phi": 8, "curvatures": 2}
 
 
-@pytest.fixture(autouse=True)
-def _cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
-
-
 def _scene(shape, integrator):
     return mi.load_dict({
         "type": "scene", "integrator": {"type": integrator},

@@ -7,11 +7,6 @@ import pytest
 KEY = "s.bsdf.nested.reflectance.value"
 
 
-@pytest.fixture(autouse=True)
-def _cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
-
-
 def _scene(kind, integrator):
     bsdf = {"type": kind, "height": {"type": "cells", "to_uv": mi.ScalarTransform4f().scale([2, 2, 1])},
             "depth": 0.05, "tiling": 2,

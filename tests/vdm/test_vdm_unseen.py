@@ -19,11 +19,6 @@ SMALL = {"vdm_res": "32", "svd_terms": "8", "mvm_terms": "4"}
 TABLE = {"res": 16, "theta": 4, "phi": 8, "curvatures": 4, "svd_terms": 4, "mvm_terms": 2}
 
 
-@pytest.fixture(autouse=True)
-def _cache(tmp_path, monkeypatch):
-    monkeypatch.setenv("MI_DISPLACE_CACHE", str(tmp_path))
-
-
 def _torus_obj(path, shrink=0.0):
     pos, uv, faces = assets.parametric_grid("torus", 48, major_radius=1.0, minor_radius=0.4)
     if shrink:  # a triangle soup: every face pulled towards its centre, nothing shared

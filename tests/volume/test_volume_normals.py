@@ -109,3 +109,76 @@ def test_composite_normal_matrix_is_the_chain_rule(variant):
         J[:, :, k] = (_np(chain.exact(_p(pts + e)).p) - _np(chain.exact(_p(pts - e)).p)) / (2 * h)
     err = np.abs(B - J.transpose(0, 2, 1)).max((1, 2))
     assert np.median(err) < 0.02 and err.max() < 0.1
+
+
+def _ball_volume(maps=(), **kw):
+    """The soft ball of ``_ball`` under ``maps`` (32-bit D_k), approximated and prepared;
+    ``kw`` go to DisplacedVolume (its transfer ramp is the default unless given)."""
+    from mi_displace.volume.displacement import DisplacementChain
+    from mi_displace.volume.field import DisplacedVolume
+
+    v = DisplacedVolume(_ball(), DisplacementChain(list(maps), bits=32), mode="approximation", **kw)
+    v.prepare()
+    return v
+
+
+def test_where_the_field_is_flat_every_normal_is_the_fallback(variant):
+    # inside the ball's core the density is constant (gradient 0): no direction is defined,
+    # and every method returns the caller's fallback, with its sign
+    import mitsuba as mi
+
+    v = _ball_volume(tf_low=0.0, tf_high=1.0)
+    core = _p(np.random.default_rng(2).uniform(-0.05, 0.05, (50, 3)))
+    for fallback in ([0.0, 0.0, 1.0], [0.6, -0.8, 0.0]):
+        for method in ("gradient", "jacobian", "blend"):
+            n = _np(v.normal(core, method, mi.Vector3f(fallback)))
+            assert np.allclose(n, fallback, atol=1e-6), (method, fallback)
+
+
+def test_a_lookup_without_the_alpha_gradient_gives_the_same_blend_normals(variant):
+    # normal(lookup=...) reuses a caller's D_k pre-image and reads the terms its method needs
+    # itself: a lookup made without grad alpha gives the blend normals of none
+    import mitsuba as mi
+
+    from mi_displace.volume.displacement import PlacedMap
+
+    v = _ball_volume([PlacedMap("slabs", {"count": 2, "gap": 0.15},
+                                to_world=np.diag([1.0, 1.0, 0.6, 1.0]) + np.c_[np.zeros((4, 3)), [-.5, -.5, -.3, 0]])],
+                     tf_low=0.0, tf_high=1.0)
+    p = _p(np.random.default_rng(6).uniform(-0.3, 0.3, (2000, 3)))
+    fb = mi.Vector3f(0, 0, 1)
+    plain = v.chain.approximate(p, normals=True, alpha_gradient=False)
+    assert plain.B is not None and plain.galpha is None
+    for method in ("jacobian", "blend"):
+        np.testing.assert_allclose(_np(v.normal(p, method, fb, lookup=plain)), _np(v.normal(p, method, fb)),
+                                   atol=1e-6)
+    full = v.chain.approximate(p, normals=True)
+    np.testing.assert_allclose(_np(v.normal(p, "blend", fb, lookup=full)), _np(v.normal(p, "blend", fb)), atol=1e-6)
+
+
+def test_blend_is_eq_7_between_the_jacobian_and_the_cut_normal(variant):
+    # eq. 7: n = normalize(w n_J - (1 - w) grad alpha_s / |grad alpha_s|), w = clip(2 alpha_s - 1)
+    # where 1/2 < alpha_s < 1 (near a cut face) both terms count
+    import mitsuba as mi
+
+    from mi_displace.volume.displacement import PlacedMap
+
+    m4 = np.diag([1.0, 1.0, 0.6, 1.0])
+    m4[:3, 3] = [-0.5, -0.5, -0.3]
+    v = _ball_volume([PlacedMap("slabs", {"count": 2, "gap": 0.15}, to_world=m4)], tf_low=0.0, tf_high=1.0)
+    rng = np.random.default_rng(15)
+    pts = np.c_[rng.uniform(-0.25, 0.25, (20000, 2)), rng.uniform(-0.04, 0.13, 20000)]
+    p = _p(pts)
+    fb = mi.Vector3f(0, 0, 1)
+    r = v.chain.approximate(p, normals=True)
+    a, ga = np.array(r.alpha), _np(r.galpha)
+    n_j = _np(v.normal(p, "jacobian", fb))
+    n_b = _np(v.normal(p, "blend", fb))
+    w = np.clip(2 * a - 1, 0, 1)
+    g = np.linalg.norm(ga, axis=1)
+    field = np.array(v.smooth_field(p))
+    use = (w > 0.1) & (w < 0.9) & (g > 1e-2) & (field > 0.05)
+    assert use.sum() > 100
+    want = w[:, None] * n_j - (1 - w[:, None]) * ga / np.maximum(g, 1e-30)[:, None]
+    want /= np.linalg.norm(want, axis=1, keepdims=True)
+    assert np.abs(n_b[use] - want[use]).max() < 1e-4

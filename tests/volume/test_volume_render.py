@@ -3,7 +3,8 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from volume_helpers import points as _points
+from test_volume_normals import _ball_volume
+from volume_helpers import points as _points, to_numpy as _np
 
 
 def _volume(mode="approximation", maps=None, **kw):
@@ -195,6 +196,7 @@ def test_fast_paths_agree_with_the_slow_ones(variant, monkeypatch, tilt):
         again = _render(_scene("volume_slicer", vol, reuse_lookup=False, **kw))
         assert img.max() > 0 and np.array_equal(img, again), kw
 
+
 def test_volume_methods_in_a_trace_run_with_the_collector_paused(variant, monkeypatch):
     """volpath's medium calls are vectorised: Dr.Jit traces every live medium, holding plain
     pointers, and the heterogeneous medium calls the Python volume (sigma_t and albedo) inside
@@ -248,3 +250,37 @@ def test_a_camera_move_compiles_no_new_kernel(variant):
     assert all(np.isfinite(img).all() for img in images)
     assert profile["kernels"] > 3
     assert profile["cache_misses"] == 0, profile
+
+
+def test_majorant_is_the_tight_bound_of_sigma_t(variant):
+    # density_scale * tau(largest voxel), raised by only 1e-5 relative (field docstring)
+    v = _ball_volume(tf_low=0.2, tf_high=0.8, density_scale=7.0)
+    pts = _points(np.random.default_rng(4).uniform(-0.3, 0.3, (20000, 3)))
+    top = np.array(v.sigma_t(pts)).max()
+    assert top == pytest.approx(7.0, rel=1e-5)          # the core reaches tau = 1
+    assert top <= v.majorant() <= 7.0 * (1 + 1.5e-5)
+    assert v.nbytes() == {"object": v.obj.nbytes(), "maps": 0}
+
+
+def test_parameter_edges_and_messages(variant):
+    from mi_displace.volume import maps
+    from mi_displace.volume.displacement import PlacedMap
+    from mi_displace.volume.field import AlbedoField
+
+    q = maps.check_params("gaussian", {"amount": 0.0})          # |amount| < 1 includes 0
+    d, a = maps.evaluate("gaussian", q, _points([[0.5, 0.5, 0.5]]))
+    assert np.abs(_np(d)).max() == 0
+    assert maps.check_params("wave", {"amount": 0.9})["amount"] == 0.9   # the seam's bound is the seam's
+    with pytest.raises(ValueError) as e:
+        PlacedMap("wave", resolution=(1, 8, 8))
+    assert str(e.value).startswith("wave resolution: ")
+    v = _ball_volume()
+    for bad in ([1.5, 0, 0], [-0.1, 0.5, 0.5], [np.nan, 0, 0]):
+        with pytest.raises(ValueError) as e:
+            AlbedoField(v, bad, [1, 1, 1])
+        assert str(e.value) == f"albedo_low: an RGB albedo needs three values in [0, 1], got {np.asarray(bad, float)}"
+    from mi_displace.volume.field import DisplacedVolume
+
+    with pytest.raises(ValueError) as e:
+        DisplacedVolume(v.obj, v.chain, tf_low=0.5, tf_high=0.5)
+    assert str(e.value) == "tf_low/tf_high: need finite tf_low < tf_high, got 0.5, 0.5"
