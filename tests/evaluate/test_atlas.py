@@ -1,10 +1,19 @@
-"""The atlas's options by name and its budget table.
+"""The atlas's options by name, its budget table, and its page in a real browser.
 
 Names come from the scene files (the technique plugin each point renders) and the points'
 build statistics; the pick within a budget is checked by brute force over every option of a
 synthetic sweep (approximation points, raw and denoised path points with random errors and
-times), and the portable units against the curve's own 1-spp render time.
+times), and the portable units against the curve's own 1-spp render time.  The page, with
+the sweep's images and plot written beside it, is loaded in headless Chromium: it loads,
+every image resolves (``naturalWidth > 0``) and nothing is written to the console; a copy
+with a missing image and a console error shows the check sees both.
 """
+import json
+import os
+import re
+import shutil
+import subprocess
+
 import numpy as np
 import pytest
 
@@ -47,7 +56,9 @@ def _synthetic(seed: int) -> dict:
     values = ["8", "16", "48"]
     points = [{"point": {"resolution": v}, "label": f"resolution={v}", "ok": True,
                "flip": float(rng.uniform(0.01, 0.2)), "time_warm_s": float(rng.uniform(0.005, 5)),
-               "build_stats": []} for v in values]
+               "build_stats": [], "pareto": True, "path_crossover_s": None,
+               "path_crossover_spp": None, "denoised_crossover_s": 1.0,
+               "denoised_crossover_spp": 3.0} for v in values]
     points.append({"point": {"resolution": "0"}, "label": "resolution=0", "ok": False,
                    "error": "ValueError: resolution"})
 
@@ -61,7 +72,9 @@ def _synthetic(seed: int) -> dict:
     return {"scene": str(scene_path("tradeoff/bumpy_sphere.xml")),
             "knobs": [{"name": "resolution", "values": values + ["0"], "kind": "define"}],
             "points": points, "reference_integrator": "path", "path_curve": curve({}),
-            "denoised_curve": curve({"denoise_s": 0.01}), "denoise": "fast"}
+            "denoised_curve": curve({"denoise_s": 0.01}), "denoise": "fast",
+            "reference_spp": 64, "spp_capped": False, "noise_floor_flip": 0.004,
+            "width": 24, "height": 16}
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -92,3 +105,77 @@ def test_budget_pick_by_brute_force(seed):
             other = [o for o in fits if o[0].startswith("path")
                      and o[0].endswith("OIDN fast") == (kind == "denoised_path")]
             assert row[f"{kind}_flip"] == (min(o[1] for o in other) if other else None)
+
+
+#: The page under test in an iframe: the harness writes what the page's document holds.
+HARNESS = """<!DOCTYPE html><html><head><meta charset="utf-8"><link rel="icon" href="data:,">
+</head><body><iframe id="page" src="PAGE" width="1200" height="900"></iframe><pre id="out"></pre>
+<script>
+document.getElementById("page").addEventListener("load", () => {
+  const doc = document.getElementById("page").contentDocument;
+  document.getElementById("out").textContent = JSON.stringify({
+    title: doc.title, headings: Array.from(doc.querySelectorAll("h2"), h => h.textContent),
+    images: Array.from(doc.images, i => [i.getAttribute("src"), i.complete, i.naturalWidth])});
+});
+</script></body></html>"""
+INSTALL = "apt-get update && apt-get install -y chromium"
+
+
+def _chromium() -> str:
+    """The Chromium binary; skips (no ``CI``) or fails (``CI`` set) without one."""
+    found = shutil.which("chromium")
+    if found is None:
+        message = f"headless Chromium is needed for the atlas page test: {INSTALL}"
+        if os.environ.get("CI"):
+            pytest.fail(message)
+        pytest.skip(message)
+    return found
+
+
+def browse(page) -> tuple[dict, list[str]]:
+    """Load ``page`` in headless Chromium (inside :data:`HARNESS`, written beside it).
+
+    Returns:
+        ``(state, console)``: the page's title, ``<h2>`` texts and every image's ``[src,
+        complete, naturalWidth]`` after its load event, and every console message it wrote.
+    """
+    harness = page.parent / "_harness.html"
+    harness.write_text(HARNESS.replace("PAGE", page.name))
+    run = subprocess.run(
+        [_chromium(), "--headless", "--no-sandbox", "--disable-gpu",
+         "--allow-file-access-from-files", "--enable-logging=stderr", "--v=0",
+         "--virtual-time-budget=10000", "--dump-dom", harness.as_uri()],
+        capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    state = re.search(r'<pre id="out">(.*?)</pre>', run.stdout, re.S)
+    assert state and state.group(1), f"the harness saw no load event: {run.stdout[-2000:]}"
+    console = [line for line in run.stderr.splitlines() if ":CONSOLE" in line]
+    return json.loads(state.group(1).replace("&quot;", '"').replace("&amp;", "&")), console
+
+
+def test_atlas_page_in_chromium(tmp_path):
+    from mi_displace.core.io import write_image
+    from mi_displace.evaluate import tradeoff as tr
+
+    result = _synthetic(3)
+    folder = tmp_path / "s"
+    folder.mkdir()
+    rng = np.random.default_rng(3)
+    for i, p in enumerate(result["points"]):
+        if p["ok"]:
+            write_image(folder / f"point_{i}.png", rng.uniform(0, 1, (16, 24, 3)))
+    tr.plot(result, folder / "tradeoff.png")
+    page = atlas.write_html(tmp_path / "index.html", {"s": result}, tmp_path, {})
+    state, console = browse(page)
+    assert state["title"] == "mi_displace trade-off atlas" and "What to pick" in state["headings"]
+    expected = 1 + sum(p["ok"] for p in result["points"])  # the plot and every point image
+    assert len(state["images"]) == expected == page.read_text().count("<img ")
+    assert all(complete and width > 0 for _, complete, width in state["images"]), state["images"]
+    assert console == []
+    # the check sees a missing image and a console error
+    (folder / "point_0.png").unlink()
+    broken = tmp_path / "broken.html"
+    broken.write_text(page.read_text().replace("</body>", "<script>console.error('x')</script></body>"))
+    state, console = browse(broken)
+    assert [src for src, _, width in state["images"] if width == 0] == ["s/point_0.png"]
+    assert len(console) == 1 and '"x"' in console[0]
