@@ -49,6 +49,17 @@ TECHNIQUE_KINDS = ("shape", "bsdf", "volume")
 THUMB_PX = 128
 #: What an option is: an approximation setting, a raw or a denoised path-curve point.
 KINDS = ("approximation", "path", "denoised path")
+#: Film side (pixels) of the pass that measures a scene's view (:func:`scene_facts`).
+FACTS_RES = 48
+#: A pixel is seen at a grazing angle beyond this angle between its view ray and the
+#: surface's geometric normal (degrees).
+GRAZING_DEG = 70.0
+#: A covered pixel is on an outline when a 4-neighbour is uncovered or the second
+#: difference of inverse depth across it exceeds this fraction of its inverse depth.
+DEPTH_JUMP = 0.1
+#: The kinds of problem a scene poses (:func:`scene_facts`), in the order of the guide.
+BASE_KINDS = ("height field on a parametric base", "height field on a mesh",
+              "tiles of arbitrary geometry", "volume")
 
 
 def atlas_scenes(scenes_dir) -> list[Path]:
@@ -139,6 +150,108 @@ def technique_name(scene_path, knobs: list[dict], row: dict, plugins: dict | Non
     if mode == "reference":
         name = f"true geometry: {name}"
     return name if integrator == "raster" else f"{name} ({integrator})"
+
+
+def _base_facts(scene_path, plugins: dict) -> dict:
+    """``base_kind`` (:data:`BASE_KINDS`), ``base`` and ``closed`` / ``open_edges`` of a
+    scene, from the technique elements of its approximation side, then its reference side,
+    at the scene's defaults."""
+    from mi_displace.core.mesh_io import load_uv_mesh
+    from mi_displace.core.surfaces import BASES
+    from mi_displace.vdm.mesh_curvature import open_edge_count
+
+    scene_path = Path(scene_path)
+    defaults = cmp.scene_defaults(scene_path)
+    elements = [e for mode in ("approximation", "reference")
+                for e in scene_elements(scene_path, {**defaults, "mode": mode}) if e[1] in plugins]
+    types = {t for _, t, _ in elements}
+    if any(tag == "volume" for tag, _, _ in elements):
+        return {"base_kind": BASE_KINDS[3], "base": "volume", "closed": None, "open_edges": None}
+    def base_of(plugin, props):  # a shape plugin without a `base` parameter takes meshes only
+        spec = plugins[plugin]
+        meshes_only = spec is not None and spec.kind == "shape" and not any(
+            p.name == "base" for p in spec.all_params())
+        return props.get("base") or ("mesh" if props.get("filename") or meshes_only else None)
+
+    based = [(base_of(t, props), props) for _, t, props in elements if base_of(t, props)]
+    base, props = based[0] if based else (None, {})
+    filename = props.get("filename")
+    if base == "mesh" and filename:
+        positions, _, _, faces = load_uv_mesh(str(scene_path.parent / filename))
+        open_edges = open_edge_count(positions, faces)
+        closed = open_edges == 0
+    else:
+        cls = BASES.get(base)
+        closed = None if cls is None else cls.periodic_u and (cls.periodic_v or cls.poles)
+        open_edges = None
+    kind = BASE_KINDS[2] if "ddm" in types else BASE_KINDS[1] if base == "mesh" else BASE_KINDS[0]
+    return {"base_kind": kind, "base": base, "closed": closed, "open_edges": open_edges}
+
+
+def _view_facts(scene_path, result: dict) -> dict:
+    """How the scene is seen: its fastest measured point loaded and drawn by Mitsuba's
+    ``aov`` integrator (depth, geometric normal, position; one ray per pixel at
+    :data:`FACTS_RES`² when the scene has a ``res`` parameter)."""
+    import mitsuba as mi
+    import numpy as np
+
+    from mi_displace.render import scene as scenes
+
+    ok = [r for r in result["points"] if r["ok"]]
+    fastest = min(ok, key=lambda r: r["time_warm_s"])
+    knobs = [tr.Knob(k["name"], tuple(k["values"]), k["kind"]) for k in result["knobs"]]
+    job = tr._point_job(scene_path, cmp.protocol_settings(scene_path), fastest["point"], knobs, 3)
+    res = {"res": str(FACTS_RES)} if "res" in cmp.scene_defaults(scene_path) else {}
+    scene, _ = scenes.load(scene_path, **{**job["xml_params"], **res}, mode=job["mode"],
+                           integrator=job["integrator"])
+    scenes.apply_edits(scene, job["edits"])
+    aovs = mi.load_dict({"type": "aov", "aovs": "dd:depth,nn:geo_normal,pp:position"})
+    image = np.asarray(mi.render(scene, integrator=aovs, spp=1))
+    camera = np.asarray(scene.sensors()[0].world_transform().translation()).ravel()
+    depth, normal, position = image[..., 0], image[..., 1:4], image[..., 4:7]
+    covered = depth > 0
+    to_camera = camera - position
+    to_camera /= np.maximum(np.linalg.norm(to_camera, axis=-1, keepdims=True), 1e-12)
+    cosine = np.abs(np.sum(normal * to_camera, axis=-1)) / np.maximum(
+        np.linalg.norm(normal, axis=-1), 1e-12)
+    angle = np.degrees(np.arccos(np.clip(cosine, 0.0, 1.0)))[covered]
+    # inverse depth is linear in screen space across a plane: its second difference
+    # stays near 0 on smooth surfaces and jumps where one surface occludes another
+    inverse = np.pad(np.where(covered, 1.0 / np.maximum(depth, 1e-12), 0.0), 1)
+    centre = inverse[1:-1, 1:-1]
+    outline = np.zeros_like(covered)
+    for before, after in ((inverse[:-2, 1:-1], inverse[2:, 1:-1]),
+                          (inverse[1:-1, :-2], inverse[1:-1, 2:])):
+        outline |= (before <= 0) | (after <= 0)
+        outline |= np.abs(before + after - 2 * centre) > DEPTH_JUMP * centre
+    outline &= covered
+    count = max(int(covered.sum()), 1)
+    return {"coverage": float(covered.mean()),
+            "view_angle_deg": float(np.median(angle)) if angle.size else None,
+            "grazing_share": float(np.mean(angle > GRAZING_DEG)) if angle.size else None,
+            "outline_share": float(outline.sum() / count), "facts_from": fastest["label"]}
+
+
+def scene_facts(scene_path, result: dict) -> dict:
+    """What kind of problem a scene poses, measured (for the guide, :func:`choosing_markdown`).
+
+    Returns:
+        ``base_kind`` (:data:`BASE_KINDS`: a ``ddm`` plugin makes tiles, a volume plugin a
+        volume, a ``mesh`` base or ``filename`` a height field on a mesh, else on a
+        parametric base), ``base``, ``closed`` (a mesh: no edge used by one face once
+        vertices are welded, ``open_edges`` counts them; a parametric base: periodic in u
+        and in v or closed by poles; ``None`` for a volume), and for surfaces how it is
+        seen at :data:`FACTS_RES`² from its fastest measured point: ``coverage`` (share of
+        pixels on the geometry), ``view_angle_deg`` (median angle between view ray and
+        geometric normal over them), ``grazing_share`` (share beyond :data:`GRAZING_DEG`),
+        ``outline_share`` (share of them on an outline, the object's own or where it hides
+        itself: :data:`DEPTH_JUMP`) and
+        ``facts_from`` (that point's label).
+    """
+    facts = _base_facts(scene_path, technique_plugins())
+    if facts["base_kind"] != BASE_KINDS[3]:
+        facts.update(_view_facts(scene_path, result))
+    return facts
 
 
 def scene_file(name: str, result: dict, scenes_dir=None) -> Path:
@@ -371,7 +484,8 @@ def atlas(out_dir, scenes_dir=None, max_spp: int = 1024, cluster: str | None = N
 
     Returns:
         ``{"scenes": {name: tradeoff result, each point with its "technique" name},
-        "units": {name: :func:`units`}, "failures": {name: message}, "budgets": rows}``.
+        "units": {name: :func:`units`}, "facts": {name: :func:`scene_facts`},
+        "failures": {name: message}, "budgets": rows}``.
     """
     from mi_displace.core.resources import scenes_dir as default_scenes_dir
 
@@ -396,6 +510,8 @@ def atlas(out_dir, scenes_dir=None, max_spp: int = 1024, cluster: str | None = N
             if option["index"] is not None:
                 result["points"][option["index"]]["technique"] = option["name"]
     record = {"scenes": results, "units": {n: units(r, found[n]) for n, r in results.items()},
+              "facts": {n: scene_facts(scene_file(n, r, scenes_dir), r)
+                        for n, r in results.items()},
               "failures": failures, "budgets": budgets}
     with open(out_dir / "atlas.json", "w") as f:
         json.dump(cmp._finite_or_none(record), f, indent=2, allow_nan=False)
