@@ -516,3 +516,137 @@ def atlas(out_dir, scenes_dir=None, max_spp: int = 1024, cluster: str | None = N
     with open(out_dir / "atlas.json", "w") as f:
         json.dump(cmp._finite_or_none(record), f, indent=2, allow_nan=False)
     return record
+
+
+#: Where ``python -m mi_displace.evaluate.atlas`` reads the atlas and writes the guide.
+DOCS = Path(__file__).resolve().parents[2] / "docs"
+
+
+def _md(value, digits: int = 3) -> str:
+    return "–" if value is None else f"{value:.{digits}g}" if isinstance(value, float) else str(value)
+
+
+def _remake_command(record: dict) -> str:
+    """The ``mi-displace atlas`` command line that re-makes ``record`` (its settings)."""
+    first = next(iter(record["scenes"].values()))
+    parts = ["mi-displace atlas --out docs/atlas"]
+    if first.get("noise_floor_target") is not None:
+        parts.append(f"--noise-floor {first['noise_floor_target']:g}")
+    parts.append(f"--max-spp {first['max_spp']}")
+    if first.get("denoise"):
+        parts.append(f"--denoise {first['denoise']}")
+    return " ".join(parts)
+
+
+def _scene_lines(name: str, result: dict, facts: dict, budgets: list[dict]) -> list[str]:
+    """A scene's paragraph of the guide: what it is, then its budget rows where something fits."""
+    base = facts["base"] or "unknown base"
+    closed = ("" if facts["base_kind"] == BASE_KINDS[3] else
+              {True: ", closed", False: ", open", None: ", closedness not measured"}[facts["closed"]])
+    seen = ("" if facts.get("view_angle_deg") is None else
+            f"; seen at a median {facts['view_angle_deg']:.0f}° from the normal, "
+            f"{100 * facts['grazing_share']:.0f} % of its pixels beyond {GRAZING_DEG:.0f}°, "
+            f"{100 * facts['outline_share']:.0f} % on an outline")
+    knobs = " ".join(f"--knob {k['name']}={','.join(k['values'])}" for k in result["knobs"])
+    denoise = f" --denoise {result['denoise']}" if result.get("denoise") else ""
+    lines = [f"### `{name}`", "",
+             f"{base}{closed}{seen}. Reference: {result['reference_integrator']}, "
+             f"{result['reference_spp']} spp, noise floor FLIP {result['noise_floor_flip']:.3g}, "
+             f"{result['width']}×{result['height']}. Re-made alone by:", "", "```console",
+             f"mi-displace tradeoff scenes/{name}.xml {knobs}{denoise} --max-spp "
+             f"{result['max_spp']} --out DIR", "```", "",
+             "| budget (s) | × 1-spp path | pick | FLIP | best approximation (FLIP) | "
+             "path (FLIP) | denoised path (FLIP) |", "|---|---|---|---|---|---|---|"]
+    for b in budgets:
+        if b["scene"] != name or b["pick"] is None:
+            continue
+        lines.append(
+            f"| {_md(b['budget_s'])} | {_md(b['budget_path_spp'])} | {b['pick']} | "
+            f"{_md(b['pick_flip'])} | {b['technique'] or '–'} ({_md(b['flip'])}) | "
+            f"{b['path'] or '–'} ({_md(b['path_flip'])}) | "
+            f"{b['denoised_path'] or '–'} ({_md(b['denoised_path_flip'])}) |")
+    return lines + [""]
+
+
+def choosing_markdown(record: dict, scenes_dir=None) -> str:
+    """The "Choosing a technique" guide (``docs/choosing.md``) from an atlas record
+    (``atlas.json``): scenes grouped by base kind, then open or closed base; each with its
+    measured view, its budget rows (:func:`budget_table`) and the commands that re-make
+    them; then the picks by view angle and by budget."""
+    results, facts = record["scenes"], record["facts"]
+    budgets = budget_table(results, scenes_dir=scenes_dir)
+    lines = [
+        "# Choosing a technique", "",
+        "Generated from the trade-off atlas ([the atlas page](atlas/index.html), "
+        "`docs/atlas/atlas.json`) by `python -m mi_displace.evaluate.atlas`; do not edit by "
+        "hand.  Every number is measured; the atlas is re-made (minutes to an hour) by:", "",
+        "```console", _remake_command(record), "```", "",
+        "Each option is measured against a converged path-traced reference: mean FLIP (lower "
+        "is better) and warm time per frame, build included, on the machine that made the "
+        "atlas.  Budgets are seconds per frame and, to carry them to another machine, × the "
+        "render time of one path sample per pixel measured in the same run.  *pick* is the "
+        "most accurate option within the budget: an approximation by its technique name, "
+        "path tracing raw (`path N spp`) or denoised (`path N spp + OIDN`). Only budgets "
+        "within which something renders are listed; [the atlas page](atlas/index.html) has "
+        "every option with its image and the verdict sentences.", ""]
+    for kind in BASE_KINDS:
+        names = [n for n in results if facts[n]["base_kind"] == kind]
+        if not names:
+            continue
+        lines += [f"## {kind[0].upper()}{kind[1:]}", ""]
+        for closed, title in ((True, "Closed base"), (False, "Open base"),
+                              (None, "Closedness not measured" if kind != BASE_KINDS[3] else "")):
+            group = [n for n in names if facts[n]["closed"] is closed]
+            if not group:
+                continue
+            if title:
+                lines += [f"**{title}**: " + ", ".join(f"`{n}`" for n in group) + ".", ""]
+            for name in group:
+                lines += _scene_lines(name, results[name], facts[name], budgets)
+    seen = sorted((n for n in results if facts[n].get("view_angle_deg") is not None),
+                  key=lambda n: facts[n]["view_angle_deg"])
+    middle = sorted({b["budget_s"] for b in budgets})
+    one = min(middle, key=lambda b: abs(math.log(b)))  # the budget nearest 1 s
+    lines += ["## By view angle and silhouettes", "",
+              f"Scenes from the most frontal to the most grazing view, with their pick at "
+              f"{_md(one)} s per frame; *outline* is the share of the object's pixels on an "
+              f"outline (its silhouette or where it hides itself), where a technique that "
+              f"only shades the base (bump, relief, horizon) cannot be right.", "",
+              "| scene | median view angle | beyond 70° | outline | pick at "
+              f"{_md(one)} s (FLIP) | best approximation (FLIP) |", "|---|---|---|---|---|---|"]
+    for n in seen:
+        b = next(r for r in budgets if r["scene"] == n and r["budget_s"] == one)
+        f = facts[n]
+        lines.append(f"| `{n}` | {f['view_angle_deg']:.0f}° | {100 * f['grazing_share']:.0f} % | "
+                     f"{100 * f['outline_share']:.0f} % | {b['pick'] or '–'} "
+                     f"({_md(b['pick_flip'])}) | {b['technique'] or '–'} ({_md(b['flip'])}) |")
+    lines += ["", "## By budget", "",
+              "How often each kind of option is the pick, over the scenes of the atlas:", "",
+              "| budget (s) | " + " | ".join(KINDS) + " | nothing fits |",
+              "|---|" + "---|" * (len(KINDS) + 1)]
+    for budget in middle:
+        rows = [r for r in budgets if r["budget_s"] == budget]
+        counts = [sum(r["pick_kind"] == k for r in rows) for k in KINDS]
+        lines.append(f"| {_md(budget)} | " + " | ".join(map(str, counts))
+                     + f" | {sum(r['pick'] is None for r in rows)} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m mi_displace.evaluate.atlas [ATLAS_JSON [OUT_MD]]``: write the guide
+    (default: ``docs/atlas/atlas.json`` to ``docs/choosing.md`` of the checkout)."""
+    import sys
+
+    import mi_displace
+
+    argv = sys.argv[1:] if argv is None else argv
+    source = Path(argv[0]) if argv else DOCS / "atlas" / "atlas.json"
+    target = Path(argv[1]) if len(argv) > 1 else DOCS / "choosing.md"
+    mi_displace.init()
+    target.write_text(choosing_markdown(json.loads(source.read_text())))
+    print(f"wrote {target}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
