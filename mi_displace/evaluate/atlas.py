@@ -303,23 +303,28 @@ def _best(found: list[dict], kind: str, budget: float) -> dict | None:
     return min(fits, key=lambda o: (o["flip"], o["time_s"])) if fits else None
 
 
-def verdict(budget: float, picks: dict) -> str:
+def verdict(budget: float, picks: dict, noise_floor: float = 0.0) -> str:
     """One plain sentence for a budget: what to pick and what it beats.
 
     Args:
         budget: seconds per frame.
         picks: kind (:data:`KINDS`) -> the most accurate option of that kind within the
             budget, or ``None``.
+        noise_floor: the reference's two-seed noise floor (FLIP): a runner-up closer to
+            the pick than that is called a tie.
     """
-    fits = [o for o in picks.values() if o is not None]
+    fits = sorted((o for o in picks.values() if o is not None),
+                  key=lambda o: (o["flip"], o["time_s"]))
     if not fits:
         return f"Nothing measured renders a frame within {budget:.3g} s."
-    best = min(fits, key=lambda o: (o["flip"], o["time_s"]))
-    others = [f"{o['name']} ({o['flip']:.3g})" for o in fits if o is not best]
+    best, others = fits[0], fits[1:]
     missing = [k for k, o in picks.items() if o is None]
     text = f"Pick {best['name']} (FLIP {best['flip']:.3g}, {best['time_s']:.3g} s)"
     if others:
-        text += "; it beats " + " and ".join(others)
+        text += "; it beats " + " and ".join(f"{o['name']} ({o['flip']:.3g})" for o in others)
+        if others[0]["flip"] - best["flip"] < noise_floor:
+            text += (f"; {others[0]['name']} is within the reference's noise floor "
+                     f"({noise_floor:.2g}) of it: a tie")
     if missing:
         text += "; no " + " or ".join(missing) + " frame fits"
     return text + "."
@@ -360,7 +365,8 @@ def budget_table(results: dict[str, dict], budgets=BUDGETS_S, scenes_dir=None) -
                 "path": get(path, "name"), "path_flip": get(path, "flip"),
                 "denoised_path": get(den, "name"), "denoised_path_flip": get(den, "flip"),
                 "pick": get(pick, "name"), "pick_kind": get(pick, "kind"),
-                "pick_flip": get(pick, "flip"), "verdict": verdict(budget, picks)})
+                "pick_flip": get(pick, "flip"),
+                "verdict": verdict(budget, picks, result.get("noise_floor_flip") or 0.0)})
     return rows
 
 
