@@ -421,8 +421,9 @@ def _scene_section(name: str, result: dict, out_dir: Path, budgets: list[dict],
         f"<p>Reference: {html.escape(result['reference_integrator'])}, "
         f"{result['reference_spp']} spp{capped}, noise floor FLIP "
         f"{_num(result['noise_floor_flip'], 4)}, {result['width']}×{result['height']} pixels. "
-        f"One path sample per pixel renders in {_num(unit['path_spp_s'])} s; bump mapping's "
-        f"frame takes {_num(unit['bump_s'])} s.</p>\n"
+        f"One path sample per pixel renders in {_num(unit['path_spp_s'])} s; "
+        + (f"bump mapping's frame takes {_num(unit['bump_s'])} s." if unit["bump_s"]
+           else "no bump mapping option was measured.") + "</p>\n"
         "<table><tr><th>budget (s)</th><th>× 1-spp path render</th><th>× bump frame</th>"
         "<th>pick</th><th>its FLIP</th><th>verdict</th></tr>\n"
         f"{budget_rows}\n</table>\n{plot}\n"
