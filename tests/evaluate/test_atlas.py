@@ -189,3 +189,16 @@ def test_atlas_page_in_chromium(tmp_path):
     state, console = browse(broken)
     assert [src for src, _, width in state["images"] if width == 0] == ["s/point_0.png"]
     assert len(console) == 1 and '"x"' in console[0]
+
+
+def test_choosing_page_matches_the_atlas():
+    """docs/choosing.md is what the generator writes from docs/atlas/atlas.json, and every
+    pick it lists is one of that atlas's budget rows."""
+    record = json.loads((atlas.DOCS / "atlas" / "atlas.json").read_text())
+    page = (atlas.DOCS / "choosing.md").read_text()
+    assert page == atlas.choosing_markdown(record), (
+        "docs/choosing.md is stale: run python -m mi_displace.evaluate.atlas")
+    picks = {(r["scene"], r["pick"]) for r in record["budgets"] if r["pick"]}
+    for scene in record["scenes"]:
+        assert f"### `{scene}`" in page
+        assert any(f"| {pick} |" in page for name, pick in picks if name == scene)
