@@ -9,7 +9,7 @@ spp, raw and denoised by Open Image Denoise (build, render, AOV render and denoi
 counted in a curve point's time).  Per scene (``rows``):
 
 * ``approx_flip``, ``approx_time_s``: the approximation's mean FLIP and warm time per frame
-  (build + render, seconds);
+  (build + render, seconds); ``approx_render_s``: its warm render alone;
 * ``raw`` and ``denoised``, one dict per curve:
 
   - ``crossover_spp`` / ``crossover_s``: the spp and seconds at which that curve reaches the
@@ -19,6 +19,9 @@ counted in a curve point's time).  Per scene (``rows``):
   - ``flip_at_equal_time``: the lowest FLIP of the curve's points no slower than the
     approximation (:func:`mi_displace.evaluate.atlas.path_flip_at`; ``null``: even its
     1-spp point, whose time includes the true geometry's build, is slower);
+    ``flip_at_equal_render_time``: the same with both builds left out (the curve point's
+    render, AOV render and denoiser against the approximation's warm render: a scene built
+    once and drawn many times);
     ``first_point``: that 1-spp point (``spp``, ``time_s``, ``flip``);
   - ``verdict``: :func:`mi_displace.evaluate.tradeoff.crossover_verdict`'s sentence;
 
@@ -60,9 +63,12 @@ def _curve_summary(info: dict, name: str) -> dict:
     curve = info["path_curve" if name == "path" else "denoised_curve"]
     seconds = info[f"{name}_crossover_s"]
     first = curve[0]
+    renders = [{"time_s": p["render_s"] + p.get("denoise_s", 0.0), "flip": p["flip"]}
+               for p in curve]
     return {"crossover_spp": info[f"{name}_crossover_spp"], "crossover_s": seconds,
             "time_ratio": None if seconds is None else seconds / info["approx_time_warm_s"],
             "flip_at_equal_time": path_flip_at(curve, info["approx_time_warm_s"]),
+            "flip_at_equal_render_time": path_flip_at(renders, info["approx_render_warm_s"]),
             "first_point": {k: first[k] for k in ("spp", "time_s", "flip")},
             "verdict": info[f"{name}_verdict"]}
 
@@ -75,8 +81,15 @@ def scene_row(scene, out_dir: Path, sizes: Sizes) -> dict:
     params = {"res": str(sizes.res)} if sizes.res is not None else None
     info = compare(scene, out_dir, params=params, max_spp=sizes.max_spp,
                    denoise=sizes.quality)
-    return {"scene": Path(scene).stem, "approx_flip": info["flip_mean"],
+    return row(Path(scene).stem, info)
+
+
+def row(name: str, info: dict) -> dict:
+    """A scene's row from its comparison's metrics (``compare``'s result or the
+    ``metrics.json`` it wrote)."""
+    return {"scene": name, "approx_flip": info["flip_mean"],
             "approx_time_s": info["approx_time_warm_s"],
+            "approx_render_s": info["approx_render_warm_s"],
             "raw": _curve_summary(info, "path"), "denoised": _curve_summary(info, "denoised"),
             "reference_spp": info["reference_spp"], "noise_floor_flip": info["noise_floor_flip"],
             "width": info["width"], "height": info["height"]}
@@ -104,16 +117,18 @@ def markdown(record: dict) -> str:
     def num(value, spec=".3g"):
         return "–" if value is None else format(value, spec)
 
-    lines = ["| scene | approx. FLIP | approx. time (s) | path: spp, time (s) to match | "
-             "denoised: spp, time (s) to match | path at equal time: FLIP | "
-             "denoised path at equal time: FLIP |", "|" + "---|" * 7]
+    lines = ["| scene | approx. FLIP | approx. time, render (s) | path: spp, s to match | "
+             "denoised: spp, s to match | denoised path at equal time: FLIP | "
+             "at equal render time: path, denoised FLIP |", "|" + "---|" * 7]
     for r in record["rows"]:
         raw, den = r["raw"], r["denoised"]
         lines.append(
-            f"| {r['scene']} | {num(r['approx_flip'], '.4f')} | {num(r['approx_time_s'])} | "
-            f"{num(raw['crossover_spp'])}, {num(raw['crossover_s'])} | "
-            f"{num(den['crossover_spp'])}, {num(den['crossover_s'])} | "
-            f"{num(raw['flip_at_equal_time'], '.4f')} | {num(den['flip_at_equal_time'], '.4f')} |")
+            f"| {r['scene']} | {num(r['approx_flip'], '.4f')} | {num(r['approx_time_s'])}, "
+            f"{num(r['approx_render_s'])} | {num(raw['crossover_spp'])}, "
+            f"{num(raw['crossover_s'])} | {num(den['crossover_spp'])}, "
+            f"{num(den['crossover_s'])} | {num(den['flip_at_equal_time'], '.4f')} | "
+            f"{num(raw['flip_at_equal_render_time'], '.4f')}, "
+            f"{num(den['flip_at_equal_render_time'], '.4f')} |")
     return "\n".join(lines) + "\n"
 
 

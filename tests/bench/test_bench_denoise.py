@@ -24,6 +24,9 @@ def test_rows_match_the_comparison(variant_llvm, tmp_path):
         assert entry["first_point"] == {k: curve[0][k] for k in ("spp", "time_s", "flip")}
         within = [c["flip"] for c in curve if c["time_s"] <= row["approx_time_s"]]
         assert entry["flip_at_equal_time"] == (min(within) if within else None)
+        within = [c["flip"] for c in curve
+                  if c["render_s"] + c.get("denoise_s", 0) <= info["approx_render_warm_s"]]
+        assert entry["flip_at_equal_render_time"] == (min(within) if within else None)
         reached = [i for i, c in enumerate(curve) if c["flip"] <= row["approx_flip"]]
         if not reached:
             assert entry["crossover_s"] is None and entry["time_ratio"] is None
