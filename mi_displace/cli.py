@@ -12,6 +12,9 @@
 * ``bench NAME [--json] [--quick] [--out DIR]`` runs ``mi_displace.bench.NAME.main(json=...,
   quick=..., out=...)`` (JSON or plain-text report on stdout; ``--quick``: small sizes, the
   same code paths, seconds instead of minutes, for checking that a benchmark runs).
+* ``figures TECHNIQUE [--out DIR] [--quick] [options]`` re-makes the documentation's figures
+  of a technique (:mod:`mi_displace.figures`, lab code; default ``--out docs/figures``);
+  ``figures --list`` prints the techniques.
 * technique commands: every module in :data:`COMMAND_MODULES` defines
   ``add_commands(sub) -> dict[str, Callable[[argparse.Namespace], int]]``, which adds its
   sub-parsers to ``sub`` and returns the handler of each command name it added.
@@ -132,10 +135,43 @@ def build_parser() -> argparse.ArgumentParser:
                    help="folder for the benchmark's figures (benchmarks that write files; "
                         "default: a folder in the system's temporary directory)")
 
+    figures_parser(sub)
     for name in COMMAND_MODULES:
         for command, handler in importlib.import_module(name).add_commands(sub).items():
             sub.choices[command].set_defaults(handler=handler)
     return parser
+
+
+def figures_parser(sub) -> None:
+    """``figures TECHNIQUE``: one sub-parser per technique of :data:`mi_displace.figures.TECHNIQUES`,
+    with the common ``--out`` / ``--quick`` and the technique's own options."""
+    from mi_displace import figures
+    from mi_displace.core.resources import FIGURES_DIR
+
+    p = sub.add_parser("figures", help="re-make a technique's documentation figures "
+                                       "(figures --list: the techniques)")
+    p.add_argument("--list", action="store_true", help="print the techniques and exit")
+    techniques = p.add_subparsers(dest="technique", metavar="TECHNIQUE")
+    for name, description in figures.TECHNIQUES.items():
+        q = techniques.add_parser(name, help=description, description=description)
+        q.add_argument("--out", type=Path, default=FIGURES_DIR,
+                       help=f"output folder (default {FIGURES_DIR})")
+        q.add_argument("--quick", action="store_true",
+                       help="the same code at tiny sizes (checks that it runs; numbers not comparable)")
+        figures.module(name).add_options(q)
+
+
+def _cmd_figures(args) -> int:
+    from mi_displace import figures
+
+    if args.list:
+        width = max(map(len, figures.TECHNIQUES))
+        print("\n".join(f"{name:{width}}  {text}" for name, text in figures.TECHNIQUES.items()))
+        return 0
+    if args.technique is None:
+        raise UsageError(f"figures: name a technique ({', '.join(figures.TECHNIQUES)}), "
+                         "or --list")
+    return figures.module(args.technique).run(args)
 
 
 def _fmt(value, digits: int = 4) -> str:
@@ -288,7 +324,7 @@ def _cmd_bench(args) -> int:
 
 
 COMMANDS = {"render": _cmd_render, "compare": _cmd_compare, "showcase": _cmd_showcase,
-            "bench": _cmd_bench}
+            "bench": _cmd_bench, "figures": _cmd_figures}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -36,7 +36,7 @@ _ANIMATION_DOCS = {
 
 SPEC = PluginSpec(
     "ddm", "shape",
-    "Distance/displacement-mapped detail tiles (DDM): a base surface tiled with copies of "
+    "Deformation-displacement mapping (DDM): a base surface tiled with copies of "
     "detail tiles through T(u, v, w) = S(u, v) + n(u, v) w (eq. 1), or its geometry-image form "
     "(HDDM, eq. 2) with `mode=maps`.  `traverse` also exposes `tile_positions` (the tiles' "
     "vertices; editable, differentiable): an edit of it, `time` or `height` re-maps the "

@@ -17,7 +17,9 @@ SPEC = PluginSpec(
     "`normal_mitsuba` format for the stock BSDF).  The mi-displace loaders prepare the shapes; "
     "after `mi.load_file` call `mi_displace.bake.mitsuba_frames.prepare_scene(scene)`.",
     (Param("normalmap", "texture", REQUIRED, "the tangent-space map, (n + 1) / 2 — a `bitmap` "
-           "with raw=\"true\""),),
+           "with raw=\"true\""),
+     Param("green", "string", "+y", "the map's green-channel convention: `+y` OpenGL (Blender, "
+           "Mitsuba, Unity), `-y` DirectX (Unreal; G = 1 - G)", choices=("+y", "-y"))),
     example="""<shape type="obj">
     <string name="filename" value="parts/bake_bunny/low.obj"/>
     <bsdf type="mikk_normalmap">

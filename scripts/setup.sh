@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Idempotent set-up on a fresh Debian/Ubuntu machine: libLLVM >= 17 for Dr.Jit's CPU
-# backend, a virtualenv in .venv and `pip install -e .[test]`.  Re-running is cheap.
+# backend, a virtualenv in .venv and `pip install -e .[test]` (the test extra brings the docs extra:
+# tests/test_docs*.py build the site).  Re-running is cheap.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 

@@ -4,6 +4,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPRO = Path(__file__).resolve().parents[1] / "scripts" / "repro"
 
 
@@ -29,3 +31,22 @@ def test_plugin_constructor_error_reaches_load_dict_as_text_in_a_runtime_error(v
     assert type(user) is ValueError and "\n" not in str(user) and "Traceback" not in str(user)
     assert str(user).startswith("scene 'scene.xml': At dictionary node \"root\": failed to instantiate")
     assert str(user).endswith("\"raising\": raising: parameter 'roughness' must be > 0, got -1")
+
+
+@pytest.mark.parametrize("mode, crashes", [("bare", True), ("methods", True), ("frame", False),
+                                           ("turn", False), ("after", False)])
+def test_collector_inside_a_trace_frees_a_dropped_instance(variant_llvm, mode, crashes):
+    """scripts/repro/collector_trace.py (docs/platform.md): a collection while Dr.Jit traces a
+    Python BSDF that only a reference cycle holds aborts the process, also with every BSDF
+    method run with the collector paused; pausing it around the whole render protects, and
+    an instance freed before or after its turn does no harm.  When Mitsuba/Dr.Jit fix it, the crashing
+    modes exit 0 and this fails: the note and the workaround can go."""
+    run = subprocess.run([sys.executable, str(REPRO / "collector_trace.py"), mode, variant_llvm],
+                         capture_output=True, text=True, timeout=300)
+    assert run.stdout.startswith(f"mitsuba {__import__('mitsuba').__version__}, drjit ")
+    if crashes:
+        assert run.returncode < 0, (run.returncode, run.stdout, run.stderr[-2000:])
+        assert "pointer is not registered" in run.stderr
+    else:
+        assert run.returncode == 0, run.stderr[-2000:]
+        assert run.stdout.splitlines()[-1].startswith("ok, mean ")

@@ -30,7 +30,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.bake import diagnostics as diag
-from mi_displace.bake import formats, padding, unwrap
+from mi_displace.bake import albedo, curvature, formats, occlusion, padding, surface_maps, unwrap
 from mi_displace.bake.fragments import write_fragments
 from mi_displace.bake.meshdata import (MeshData, check_mesh, defect_summary, edge_counts,
                                        face_defects, load_mesh, save_obj, uv_triangle_stats,
@@ -192,22 +192,34 @@ class Baker:
         self.low_dev = LowPolyDevice(low, normals, tangents, signs, cage_pos)
         self.cage_mode = cage_pos is not None
 
-    #: channels of the interleaved (H, W, C) result: name -> (first channel, count)
+    #: channels of the interleaved (H, W, C) result, name -> (first channel, count); the
+    #: back depth (dual-depth) and the surface maps (:meth:`layout`) follow when baked
     CHANNELS = {"displacement": (0, 1), "normal_tangent": (1, 3), "normal_object": (4, 3),
-                "direction_tangent": (7, 3), "normal_mitsuba": (10, 3), "status": (13, 1),
-                "back_depth": (14, 1)}
+                "direction_tangent": (7, 3), "normal_mitsuba": (10, 3), "status": (13, 1)}
+
+    @staticmethod
+    def layout(dual_depth: bool, surface_names=()) -> dict:
+        """:data:`CHANNELS`, then ``back_depth`` if ``dual_depth``, then each surface map
+        (:data:`surface_maps.CHANNELS`): name -> (first channel, count)."""
+        layout, c = dict(Baker.CHANNELS), 14
+        for name in (["back_depth"] if dual_depth else []) + list(surface_names):
+            n = surface_maps.CHANNELS[name][0] if name in surface_maps.CHANNELS else 1
+            layout[name], c = (c, n), c + n
+        return layout
 
     def run(self, width: int, height: int, aa: int, max_distance: float, delta: float,
             dual_depth: bool, conservative: bool = True,
-            continuation: bool = False, progress=None) -> tuple[np.ndarray, dict]:
-        """Bake all texels.
+            continuation: bool = False, progress=None,
+            surface: surface_maps.SurfaceMaps | None = None) -> tuple[np.ndarray, dict]:
+        """Bake all texels (``surface``: the surface maps to evaluate too, or None).
 
         Returns:
-            (H, W, C) float32 image with the channels :data:`CHANNELS` (C = 14, or 15 with
-            the dual-depth back depth; status as a float code), and counts.
+            (H, W, C) float32 image with the channels of :meth:`layout` (status as a float
+            code), and counts.
         """
         H, W = height, width
-        C = 15 if dual_depth else 14
+        fallback = surface_maps.fallbacks(surface.settings) if surface is not None else []
+        C = 14 + dual_depth + len(fallback)
         # one device buffer for the whole map, viewed by NumPy without a copy at the end
         # (Dr.Jit's allocation cache reuses its pages on the next bake of the same size)
         flat = dr.empty(mi.Float, H * W * C)
@@ -217,17 +229,23 @@ class Baker:
         start = time.perf_counter()
         # opaque: the kernels do not change with the distances (nor with the block, below)
         max_distance, delta = dr.opaque(mi.Float, max_distance), dr.opaque(mi.Float, delta)
+        keys = dr.opaque(mi.UInt64, aa * aa + 1)   # sample keys: texel x (aa^2 + 1) + sub
         for row0 in range(0, H, rows):  # blocks of rows (bounded memory), not per texel
             n_rows = min(rows, H - row0)
             s = rasterize_rows(self.layout, W, H, row0, n_rows, aa, conservative)
             conservative_samples += s.conservative
             if dr.width(s.prim) == 0:  # no UV chart in these rows
-                _fill_empty(flat, row0 * W, n_rows * W, C, max_distance)
+                _fill_empty(flat, row0 * W, n_rows * W, C, max_distance, dual_depth, fallback)
                 continue
             dr.scatter(tri_hit, 1, s.prim)
             r = trace(self.high_dev, self.low_dev, s.prim, s.b1, s.b2, max_distance, delta,
                       dual_depth, continuation)
-            _texel_average(r, s.texel, n_rows * W, aa, max_distance, flat, row0 * W)
+            surface_values = []
+            if surface is not None:
+                key = (mi.UInt64(s.texel) + dr.opaque(mi.UInt64, row0 * W)) * keys + mi.UInt64(s.sub)
+                surface_values = surface.evaluate(r, key, delta)
+            _texel_average(r, s.texel, n_rows * W, aa, max_distance, flat, row0 * W,
+                           surface_values, fallback)
             if progress is not None:
                 progress(f"  rows {row0 + n_rows}/{H} traced ({time.perf_counter() - start:.1f} s)")
         ores = min(max(width, height), OVERLAP_RESOLUTION)
@@ -238,26 +256,32 @@ class Baker:
         return np.asarray(flat).reshape(H, W, C), extra
 
 
-def _fill_empty(flat: mi.Float, first: int, n_tex: int, C: int, max_distance: float) -> None:
+def _fill_empty(flat: mi.Float, first: int, n_tex: int, C: int, max_distance: float,
+                dual_depth: bool, fallback: list) -> None:
     """What :func:`_texel_average` writes for texels without samples, for a whole block:
     displacement 0, +z for the normals and the direction, status ``empty``, back depth
-    -max_distance."""
+    -max_distance, the surface maps' ``fallback`` values."""
     idx = dr.arange(mi.UInt32, n_tex * C)
     c = idx % C
     first = dr.opaque(mi.UInt32, first)
     value = mi.Float(0.0)
     for name in ("normal_tangent", "normal_object", "direction_tangent", "normal_mitsuba"):
         value = dr.select(c == Baker.CHANNELS[name][0] + 2, 1.0, value)     # the z component
-    value = dr.select(c == Baker.CHANNELS["back_depth"][0], -max_distance, value)
+    if dual_depth:
+        value = dr.select(c == 14, -max_distance, value)
+    for k, v in enumerate(fallback):
+        if v:
+            value = dr.select(c == 14 + dual_depth + k, v, value)
     dr.scatter(flat, value, idx + first * C)
 
 
 def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.Float,
-                   first: int) -> None:
+                   first: int, extra=(), extra_empty=()) -> None:
     """Per-texel mean of the samples that hit (Dr.Jit), interleaved into ``flat``.
 
     ``flat`` holds C channels per texel; this block's ``n_tex`` texels start at texel
-    ``first``.
+    ``first``.  ``extra``: per-sample surface-map channels (mi.Float each) averaged like the
+    others, ``extra_empty`` their values where no sample hit.
 
     Only ``ok`` and ``ambiguous`` samples carry values (a back-facing hit is never measured).
     Texels without one keep displacement 0, the low-poly normal and the tangent-space z axis
@@ -271,6 +295,8 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.
               *r.normal_mitsuba]
     if r.back_depth is not None:
         values.append(r.back_depth)
+    first_extra = len(values)
+    values += list(extra)
     # status: the worst of the samples that hit, if any did (an anti-aliased texel keeps its
     # average when one sample misses), else the worst of all (miss / beyond / backface)
     st = dr.zeros(mi.UInt32, n_tex)
@@ -307,6 +333,7 @@ def _texel_average(r, texel, n_tex: int, aa: int, max_distance: float, flat: mi.
     channels = [sums[0] * inv, *nt, *no, *dirn, *nm, mi.Float(dr.select(has, st_hit, st))]
     if r.back_depth is not None:
         channels.append(dr.select(has, sums[13] * inv, -max_distance))
+    channels += [dr.select(has, sums[first_extra + k] * inv, v) for k, v in enumerate(extra_empty)]
     C = len(channels)
     base = (dr.arange(mi.UInt32, n_tex) + dr.opaque(mi.UInt32, first)) * C
     for c, v in enumerate(channels):
@@ -319,7 +346,9 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
          cage=None, cage_offset: float | None = None, target_faces: int = 5000,
          smoothing_iterations: int = 10, conservative: bool = True,
          min_hit_fraction: float = 0.5, delta: float | None = None,
-         progress=None) -> BakeResult:
+         ao_samples: int = 64, ao_distance: float | None = None, ao_seed: int = 0,
+         curvature_range: float | None = None, high_texture=None, high_colors=None,
+         green: str = "+y", progress=None) -> BakeResult:
     """Bake maps of ``high`` over ``low`` (paths or :class:`MeshData`).
 
     Args:
@@ -330,11 +359,12 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
         res: map size in texels (int, or (width, height)).
         out_dir: folder for maps, sidecars, ``low.obj`` and ``bake.json`` (``None``: no files).
         aa: sub-samples per texel side (aa x aa regular grid; 1 = texel centre).
-        max_distance: largest |displacement| searched [object units]; default derived from
+        max_distance: largest displacement magnitude searched [object units]; default derived from
             the pair (:func:`default_max_distance`), recorded in ``bake.json``.
         pad: edge padding radius [texels]; texels that missed the high-poly are filled
             from their nearest hit texel within the same radius.
-        map_formats: names from :data:`formats.FORMATS`.
+        map_formats: names from :data:`formats.FORMATS`, or ``"all"`` (the albedo formats
+            only with a colour source).
         diagnostics: diagnostics mode (§3.1): one more ray per sample looks for a second
             crossing beyond the hit (overhangs), and ``diagnostics.png`` is written.
         cage / cage_offset: cage mesh (the low-poly's topology) or an offset along the
@@ -342,13 +372,42 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
         min_hit_fraction: fewest covered texels that must find the high-poly; below it the
             low-poly is taken not to sit near the high-poly (ValueError, no empty map).
         delta: ray start offset [object units]; default 1e-5 of the diagonal.
+        ao_samples / ao_distance / ao_seed: ambient occlusion (formats ``ao``, ``ao_float``):
+            cosine-weighted rays per bake sample, their length [object units; default
+            :data:`occlusion.DEFAULT_DISTANCE_REL` x the high-poly's diagonal] and the seed
+            (the same seed gives the same map); evaluated at the high-poly hit
+            (:mod:`occlusion`).
+        curvature_range: H_ref [1 / object units] of the curvature and cavity maps (formats
+            ``curvature``, ``cavity`` and their ``_float``); default the 99th percentile of
+            ``|H|`` over the measured texels (:mod:`curvature`).
+        high_texture / high_colors: the high-poly's colour for the albedo maps: an image
+            (path or (H, W, 3) linear RGB) looked up with the high-poly's UVs, or (V, 3)
+            linear RGB per high-poly vertex; giving one adds ``albedo`` to the formats if
+            no albedo format is listed (:mod:`albedo`).
+        green: ``"+y"`` (OpenGL: Blender, Mitsuba, Unity) or ``"-y"`` (DirectX: Unreal)
+            for the tangent-space normal maps meant for other tools (:mod:`formats`).
         progress: callable taking one line of text per stage (the CLI prints them); None: quiet.
     """
     t0 = time.perf_counter()
     say = progress or (lambda line: None)
     inputs = {k: None if v is None else v.name if isinstance(v, MeshData) else os.path.abspath(v)
               for k, v in (("high", high), ("low", low), ("cage", cage))}
+    every = map_formats == "all" or tuple(map_formats) == ("all",)
     map_formats = formats.check_formats(map_formats)
+    colour_given = high_texture is not None or high_colors is not None
+    if every and not colour_given:   # 'all' the inputs allow: no albedo without a colour
+        map_formats = tuple(f for f in map_formats if formats.SURFACE_FORMATS.get(f) != "albedo")
+    if colour_given and not any(formats.SURFACE_FORMATS.get(f) == "albedo" for f in map_formats):
+        map_formats += ("albedo",)
+    needed = {formats.SURFACE_FORMATS[f] for f in map_formats if f in formats.SURFACE_FORMATS}
+    if "albedo" in needed and not colour_given:
+        raise ValueError("formats: the albedo maps need the high-poly's colour (high_texture "
+                         "or high_colors)")
+    if green not in formats.GREEN:
+        raise ValueError(f"green: must be one of {', '.join(formats.GREEN)}, got {green!r}")
+    occlusion.check_settings(ao_samples, ao_distance, ao_seed)
+    if curvature_range is not None and not (math.isfinite(curvature_range) and curvature_range > 0):
+        raise ValueError(f"curvature_range: must be a positive curvature, got {curvature_range!r}")
     width, height = check_settings(res, aa, max_distance, pad)
     high, low, timings = prepare_inputs(high, low, target_faces, smoothing_iterations)
     say(f"inputs: high-poly {len(high.faces):,} faces, low-poly {len(low.faces):,} faces "
@@ -363,12 +422,19 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
     uv_stats = uv_triangle_stats(low.uvs, low.faces)
     start = time.perf_counter()
     baker = Baker(high, low, cage, cage_offset)
+    if ao_distance is None:
+        ao_distance = occlusion.DEFAULT_DISTANCE_REL * high.diagonal
+    settings = surface_maps.SurfaceSettings(
+        "ao" in needed, int(ao_samples), float(ao_distance), int(ao_seed), "curvature" in needed,
+        albedo.HighPolyColour(high, high_texture, high_colors) if "albedo" in needed else None)
+    surface = surface_maps.SurfaceMaps(baker.high_dev, settings) if needed else None
     dr.eval()
     timings["accel_s"] = time.perf_counter() - start
     say(f"acceleration structures and MikkTSpace frame ({timings['accel_s']:.1f} s)")
     start = time.perf_counter()
-    image, extra = baker.run(width, height, aa, max_distance, delta,
-                             "dual_d8_n16" in map_formats, conservative, diagnostics, say)
+    dual = "dual_d8_n16" in map_formats
+    image, extra = baker.run(width, height, aa, max_distance, delta, dual, conservative,
+                             diagnostics, say, surface)
     timings["raster_trace_s"] = time.perf_counter() - start
     status = image[..., Baker.CHANNELS["status"][0]].astype(np.uint8)
     covered = status != EMPTY
@@ -381,7 +447,15 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
     # misses inside a chart (holes of the high-poly) stay 0 and restoration keeps them open
     valid, _ = padding.pad(found.astype(np.float32), covered, pad)
     timings["padding_s"] = time.perf_counter() - start
-    maps = split_channels(image)
+    maps = split_channels(image, Baker.layout(dual, settings.names()))
+    surface_record = {}
+    if settings.ao:
+        surface_record["ao"] = {"samples": settings.ao_samples, "distance": settings.ao_distance,
+                                "seed": settings.ao_seed, "point": "high-poly hit"}
+    if settings.curvature:
+        ref = curvature.curvature_range(maps["curvature"], found, curvature_range)
+        maps["cavity"] = curvature.cavity(maps["curvature"], ref)
+        surface_record["curvature_range"] = ref
     maps["valid"] = valid
     maps["filled"] = filled     # texels holding a value (covered or padded): quantisation range
     timings["bake_s"] = timings["accel_s"] + timings["raster_trace_s"] + timings["padding_s"]
@@ -413,7 +487,7 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
                      "delta": delta, "padding": pad, "formats": list(map_formats),
                      "cage": None if cage is None else str(cage) if not isinstance(cage, MeshData) else cage.name,
                      "cage_offset": cage_offset, "conservative": conservative,
-                     "diagnostics": diagnostics,
+                     "diagnostics": diagnostics, "green": green, **surface_record,
                      "variant": mi.variant()},
         "counts": {**count, "covered": n_cov, "padded": int(filled.sum() - n_cov), **extra},
         "displacement_range": [float(maps["displacement"][covered].min()),   # n_cov > 0 here
@@ -430,13 +504,10 @@ def bake(high, low=None, res=1024, out_dir=None, aa: int = 1, max_distance: floa
     return result
 
 
-def split_channels(image: np.ndarray) -> dict:
-    """Views of the interleaved bake image per map name (see :attr:`Baker.CHANNELS`)."""
-    maps = {}
-    for name, (c, n) in Baker.CHANNELS.items():
-        if name != "status" and c + n <= image.shape[2]:
-            maps[name] = image[..., c] if n == 1 else image[..., c:c + n]
-    return maps
+def split_channels(image: np.ndarray, layout: dict) -> dict:
+    """Views of the interleaved bake image per map name (``layout``: :meth:`Baker.layout`)."""
+    return {name: image[..., c] if n == 1 else image[..., c:c + n]
+            for name, (c, n) in layout.items() if name != "status"}
 
 
 def write_outputs(result: BakeResult, out_dir: Path, map_formats, diagnostics_image: bool) -> None:
@@ -450,14 +521,18 @@ def write_outputs(result: BakeResult, out_dir: Path, map_formats, diagnostics_im
             "max_distance": result.record["settings"]["max_distance"],
             "aa": result.record["settings"]["aa"],
             "cage": result.record["settings"]["cage"] or result.record["settings"]["cage_offset"]}
+    settings = result.record["settings"]
+    for key in ("ao", "curvature_range"):
+        if key in settings:
+            meta[key] = settings[key]
     formats.write_png_raw(out_dir / "valid.png", (result.maps["valid"] > 0.5).astype(np.uint8) * 255)
     meta["valid"] = "valid.png"
     files = []
     for f in map_formats:
-        path = formats.write_map(out_dir, f, result.maps, meta)
+        path = formats.write_map(out_dir, f, result.maps, meta, settings["green"])
         files += [path.name, *formats.read_metadata(path).get("companions", {}).values()]
     files.append("valid.png")
-    files += write_fragments(out_dir, map_formats, low)
+    files += write_fragments(out_dir, map_formats, low, settings["green"])
     if diagnostics_image:
         formats.write_png_raw(out_dir / "diagnostics.png", diag.image(result.status))
         files.append("diagnostics.png")

@@ -2,7 +2,8 @@
 
 * ``bake --high H [--low L] --res N --out DIR [--aa A] [--max-distance D] [--padding K]
   [--formats f1,f2] [--diagnostics] [--cage C | --cage-offset D] [--target-faces F]
-  [--smoothing S] [--preview]`` -> maps + sidecars, ``low.obj``, ``valid.png``, Mitsuba
+  [--smoothing S] [--ao-samples N] [--ao-distance D] [--ao-seed S] [--curvature-range H]
+  [--high-texture IMG] [--green +y|-y] [--preview]`` -> maps + sidecars, ``low.obj``, ``valid.png``, Mitsuba
   scene fragments ``mitsuba_*.xml``, ``bake.json`` (and ``preview.png`` / ``.json``);
 * ``restore --map DIR/MAP [--low L] [--levels K | --split N] --out M.(ply|obj)``;
 * ``meshdiff A B [--samples N] [--json]`` -> RMS and Hausdorff, both ways.
@@ -54,6 +55,19 @@ def add_commands(sub) -> dict:
                    help="cage = low-poly pushed out along its normals by this distance")
     p.add_argument("--target-faces", type=_int, default=5000, help="faces of a generated low-poly")
     p.add_argument("--smoothing", type=_int, default=10, help="Taubin passes before simplifying")
+    p.add_argument("--ao-samples", type=_int, default=64,
+                   help="ambient occlusion rays per texel sample (formats ao, ao_float; default 64)")
+    p.add_argument("--ao-distance", type=_positive_float, default=None,
+                   help="ambient occlusion ray length, object units (default 0.1 x the diagonal)")
+    p.add_argument("--ao-seed", type=_int, default=0, help="ambient occlusion random seed")
+    p.add_argument("--curvature-range", type=_positive_float, default=None,
+                   help="|H| of full contrast in the curvature and cavity maps, 1/object units "
+                        "(default the 99th percentile of |H|)")
+    p.add_argument("--high-texture", default=None,
+                   help="the high-poly's colour texture (looked up with its UVs): bakes albedo")
+    p.add_argument("--green", choices=("+y", "-y"), default="+y",
+                   help="tangent-space normal map convention: +y OpenGL (default), -y DirectX "
+                        "(write --green=-y)")
     p.add_argument("--preview", action="store_true",
                    help="render the high-poly and every scene fragment side by side with FLIP "
                         "(preview.png, preview.json)")
@@ -84,8 +98,10 @@ def _cmd_bake(args) -> int:
                       max_distance=args.max_distance, pad=args.padding, map_formats=fmts,
                       diagnostics=args.diagnostics, cage=args.cage,
                       cage_offset=args.cage_offset, target_faces=args.target_faces,
-                      smoothing_iterations=args.smoothing,
-                      progress=lambda line: print(f"bake: {line}", flush=True))
+                      smoothing_iterations=args.smoothing, ao_samples=args.ao_samples,
+                      ao_distance=args.ao_distance, ao_seed=args.ao_seed,
+                      curvature_range=args.curvature_range, high_texture=args.high_texture,
+                      green=args.green, progress=lambda line: print(f"bake: {line}", flush=True))
     for w in caught:
         print(f"mi-displace: warning: {w.message}")
     r = result.record

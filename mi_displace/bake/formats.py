@@ -30,7 +30,25 @@ format (file)             pixel   channels
 ``normal_mitsuba`` (.png) RGB 8   tangent-space normal map in the frame of Mitsuba's
                                   stock ``normalmap`` BSDF (:mod:`mitsuba_frames`)
 ``normal_object`` (.png)  RGB 8   object-space normal map
+``normal_tangent16``      RGB 16  ``normal_tangent`` at 16 bits
+(.png)
+``ao`` (.png)             Y 16    ambient occlusion in [0, 1] (:mod:`occlusion`)
+``curvature`` (.png)      Y 16    signed mean curvature, 0.5 + 0.5 clip(H / H_ref, -1, 1)
+                                  (:mod:`curvature`; H_ref in the sidecar)
+``cavity`` (.png)         Y 16    clip(-H / H_ref, 0, 1)
+``albedo`` (.png)         RGB 16  the high-poly's colour, sRGB-encoded (:mod:`albedo`)
+``ao_float``,             Y 32    the same maps as float EXRs: AO, H [1 / object units],
+``curvature_float``,              cavity, linear RGB albedo (RGB 32)
+``cavity_float``,
+``albedo_float`` (.exr)
 ========================  ======  =====================================================
+
+Green channel: with ``green="-y"`` (DirectX) the tangent-space maps meant for other tools
+(``normal_tangent``, ``normal_tangent16`` and ``float_normal.exr``) store G = 1 - G of the
+OpenGL (``+y``, Blender, Mitsuba) encoding; the sidecar records ``green`` and
+:func:`read_map` undoes it.  ``normal_mitsuba`` is always ``+y`` (Mitsuba's ``normalmap`` has
+no switch) and so are the packed normals of the displacement formats (our own plugins read
+them).
 
 Every file opens as ``mi.load_dict({"type": "bitmap", "filename": ..., "raw": True})``.
 Vectors in the float EXRs are encoded like the PNGs' (``(x + 1) / 2``, what Mitsuba's
@@ -48,7 +66,18 @@ FORMATS = {
     "d8": ".png", "d16": ".png", "dir24_d8": ".png", "dir16_d16": ".png", "d8_n24": ".png",
     "dual_d8_n16": ".png", "d16_n16": ".png", "float": ".exr",
     "normal_tangent": ".png", "normal_mitsuba": ".png", "normal_object": ".png",
+    "normal_tangent16": ".png", "ao": ".png", "curvature": ".png", "cavity": ".png",
+    "albedo": ".png", "ao_float": ".exr", "curvature_float": ".exr", "cavity_float": ".exr",
+    "albedo_float": ".exr",
 }
+#: surface-map formats -> the map the baker must evaluate for them (:mod:`surface_maps`)
+SURFACE_FORMATS = {"ao": "ao", "ao_float": "ao", "curvature": "curvature",
+                   "curvature_float": "curvature", "cavity": "curvature", "cavity_float": "curvature",
+                   "albedo": "albedo", "albedo_float": "albedo"}
+#: the green-channel conventions: OpenGL (Blender, Mitsuba, Unity) and DirectX (Unreal, 3ds Max)
+GREEN = ("+y", "-y")
+#: formats whose tangent-space normal follows ``green``
+GREEN_FORMATS = ("normal_tangent", "normal_tangent16", "float")
 #: the float format's companion EXRs: name -> (file suffix, map it holds)
 FLOAT_COMPANIONS = {"normal": ("_normal", "normal_tangent"),
                     "direction": ("_direction", "direction_tangent"),
@@ -90,7 +119,21 @@ def _quantise(d: np.ndarray, offset: float, span: float, bits: int) -> tuple[np.
 
 
 def _unit8(v: np.ndarray) -> np.ndarray:
-    return np.clip(np.round((np.asarray(v, np.float64) * 0.5 + 0.5) * 255), 0, 255).astype(np.uint8)
+    return _fixed(np.asarray(v, np.float64) * 0.5 + 0.5, 8)
+
+
+def _fixed(x: np.ndarray, bits: int) -> np.ndarray:
+    """Values in [0, 1] as unsigned integers of ``bits`` (8 or 16), rounded."""
+    levels = (1 << bits) - 1
+    q = np.clip(np.round(np.asarray(x, np.float64) * levels), 0, levels)
+    return q.astype(np.uint16 if bits > 8 else np.uint8)
+
+
+def _flip_green(data: np.ndarray, levels: float) -> np.ndarray:
+    """G -> levels - G of an (H, W, 3) encoded normal map (OpenGL <-> DirectX)."""
+    data = data.copy()
+    data[..., 1] = levels - data[..., 1]
+    return data
 
 
 def _from8(q: np.ndarray) -> np.ndarray:
@@ -107,14 +150,15 @@ def _normalise(v: np.ndarray) -> np.ndarray:
     return np.where(n > 0, v / np.maximum(n, 1e-30), [0.0, 0.0, 1.0]).astype(np.float32)
 
 
-def write_png_raw(path: Path, data: np.ndarray) -> None:
-    """Write linear integer data (H, W) or (H, W, C in {3, 4}) as a PNG (uint8 or uint16)."""
+def write_png_raw(path: Path, data: np.ndarray, srgb: bool = False) -> None:
+    """Write integer data (H, W) or (H, W, C in {3, 4}) as a PNG (uint8 or uint16): linear
+    data, or (``srgb``) colours already sRGB-encoded."""
     import mitsuba as mi
 
     data = np.ascontiguousarray(data if data.ndim == 3 else data[:, :, None])
     fmt = {1: mi.Bitmap.PixelFormat.Y, 3: mi.Bitmap.PixelFormat.RGB, 4: mi.Bitmap.PixelFormat.RGBA}
     bitmap = mi.Bitmap(data, pixel_format=fmt[data.shape[2]])
-    bitmap.set_srgb_gamma(False)
+    bitmap.set_srgb_gamma(srgb)
     bitmap.write(str(path))
 
 
@@ -151,20 +195,29 @@ def read_exr_channels(path: Path) -> dict:
         raise ValueError(f"map file {str(path)!r} is not a readable EXR image ({error})") from None
 
 
-def write_map(out_dir: Path, fmt: str, maps: dict, meta: dict) -> Path:
+def write_map(out_dir: Path, fmt: str, maps: dict, meta: dict, green: str = "+y") -> Path:
     """Encode ``maps`` in format ``fmt`` under ``out_dir/fmt.<ext>`` plus ``fmt.<ext>.json``.
 
     Args:
         maps: ``displacement`` (H, W), ``normal_tangent``, ``normal_object``,
-            ``direction_tangent`` (H, W, 3), optional ``back_depth`` (H, W); float32.
-        meta: shared metadata copied into the sidecar (low-poly file, max_distance, ...).
+            ``direction_tangent`` (H, W, 3), optional ``back_depth`` (H, W); the surface
+            maps a surface format needs: ``ao``, ``curvature`` [1 / object units],
+            ``cavity`` (H, W), ``albedo`` (H, W, 3) linear; float32.
+        meta: shared metadata copied into the sidecar (low-poly file, max_distance, ...;
+            ``curvature_range`` H_ref for the curvature PNG).
+        green: ``+y`` (OpenGL) or ``-y`` (DirectX) for :data:`GREEN_FORMATS`.
     """
     path = Path(out_dir) / f"{fmt}{FORMATS[fmt]}"
     d = maps["displacement"]
     nt, dirn = maps["normal_tangent"], maps["direction_tangent"]
     side = {**meta, "format": fmt, "file": path.name, "width": int(d.shape[1]),
             "height": int(d.shape[0]), "uv_convention": UV_CONVENTION}
-    if fmt in ("d8", "d16", "dir24_d8", "dir16_d16", "d8_n24", "d16_n16"):
+    if fmt in GREEN_FORMATS:
+        side["green"] = green
+    flip = green == "-y"
+    if fmt in SURFACE_FORMATS:
+        _write_surface(path, fmt, maps, side)
+    elif fmt in ("d8", "d16", "dir24_d8", "dir16_d16", "d8_n24", "d16_n16"):
         bits = 16 if fmt in ("d16", "dir16_d16", "d16_n16") else 8
         offset, span = _range(maps.get("filled"), d)
         q, scale = _quantise(d, offset, span, bits)
@@ -199,16 +252,56 @@ def write_map(out_dir: Path, fmt: str, maps: dict, meta: dict) -> Path:
                 continue
             file = path.with_name(f"{path.stem}{suffix}.exr")
             # vectors encoded (x + 1) / 2 like the PNGs (Mitsuba's normalmap decodes 2 c - 1)
+            if value.ndim == 3:
+                value = value * 0.5 + 0.5
+                if flip and key == "normal":
+                    value = _flip_green(value, 1.0)
             write_exr_channels(file, {"Y": value} if value.ndim == 2 else
-                               {c: value[..., k] * 0.5 + 0.5 for k, c in enumerate("RGB")})
+                               {c: value[..., k] for k, c in enumerate("RGB")})
             side["companions"][key] = file.name
         side["displacement"] = {"offset": 0.0, "scale": 1.0, "bits": 32}
-    elif fmt in ("normal_tangent", "normal_mitsuba", "normal_object"):
-        write_png_raw(path, _unit8(maps[fmt]))
-        side["space"] = fmt.split("_")[1]
+    elif fmt in NORMAL_FORMATS:
+        name, bits = NORMAL_FORMATS[fmt]
+        data = _fixed(maps[name] * 0.5 + 0.5, bits)
+        write_png_raw(path, _flip_green(data, (1 << bits) - 1) if flip and fmt in GREEN_FORMATS else data)
+        side["space"] = fmt.split("_")[1].rstrip("16")
+        side["bits"] = bits
     side["tangent_convention"] = TANGENT_CONVENTION
     Path(str(path) + ".json").write_text(json.dumps(side, indent=2))
     return path
+
+
+#: the normal-map formats -> (map, bits)
+NORMAL_FORMATS = {"normal_tangent": ("normal_tangent", 8), "normal_mitsuba": ("normal_mitsuba", 8),
+                  "normal_object": ("normal_object", 8), "normal_tangent16": ("normal_tangent", 16)}
+
+
+def _write_surface(path: Path, fmt: str, maps: dict, side: dict) -> None:
+    """A surface map (:data:`SURFACE_FORMATS`): 16-bit PNG or float EXR."""
+    from mi_displace.bake.curvature import curvature_range, encode_signed
+
+    name = fmt.removesuffix("_float")
+    value = maps[name]
+    if fmt.endswith("_float"):
+        write_exr_channels(path, {"Y": value} if value.ndim == 2 else
+                           {c: value[..., k] for k, c in enumerate("RGB")})
+        side["encoding"] = "linear RGB" if name == "albedo" else (
+            "H [1 / object units]" if name == "curvature" else "value in [0, 1]")
+        return
+    if name == "albedo":
+        x = np.clip(np.asarray(value, np.float64), 0.0, 1.0)     # the sRGB curve (IEC 61966-2-1)
+        encoded = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+        write_png_raw(path, _fixed(encoded, 16), srgb=True)
+        side["encoding"] = "sRGB, 16 bit (a bitmap without raw reads linear RGB)"
+        return
+    if name == "curvature":
+        if "curvature_range" not in side:   # the map's own range (the baker passes its H_ref)
+            side["curvature_range"] = curvature_range(value, np.ones(value.shape, bool), None)
+        value = encode_signed(value, side["curvature_range"])
+        side["encoding"] = "0.5 + 0.5 clip(H / curvature_range, -1, 1), q / 65535, raw"
+    else:
+        side["encoding"] = "value = q / 65535, raw"
+    write_png_raw(path, _fixed(value, 16))
 
 
 def read_metadata(path: str | os.PathLike) -> dict:
@@ -257,12 +350,37 @@ def read_map(path: str | os.PathLike) -> dict:
                                         f"{str(file)!r}) does not exist")
             ch = read_exr_channels(companion)
             name = FLOAT_COMPANIONS[key][1]
-            out[name] = ch["Y"] if "Y" in ch else _normalise(
-                np.dstack([ch[c] for c in "RGB"]) * 2.0 - 1.0)
+            if "Y" in ch:
+                out[name] = ch["Y"]
+                continue
+            value = np.dstack([ch[c] for c in "RGB"])
+            if key == "normal" and meta.get("green") == "-y":
+                value = _flip_green(value, 1.0)
+            out[name] = _normalise(value * 2.0 - 1.0)
         return _with_valid(out, meta)
+    if fmt in SURFACE_FORMATS:
+        name = fmt.removesuffix("_float")
+        if fmt.endswith("_float"):
+            ch = read_exr_channels(file)
+            out[name] = ch["Y"] if "Y" in ch else np.dstack([ch[c] for c in "RGB"])
+        elif name == "albedo":   # sRGB-encoded: linearised like Mitsuba's bitmap does
+            import mitsuba as mi
+
+            bitmap = mi.Bitmap(str(file)).convert(component_format=mi.Struct.Type.Float32,
+                                                  srgb_gamma=False)
+            out[name] = np.array(bitmap, np.float32)
+        else:
+            value = read_png_raw(file)[..., 0].astype(np.float32) / 65535
+            out[name] = ((value - 0.5) * 2 * meta["curvature_range"] if name == "curvature"
+                         else value)
+        return out
     data = read_png_raw(file)
-    if fmt in ("normal_tangent", "normal_mitsuba", "normal_object"):
-        out[fmt] = _normalise(_from8(data[..., :3]))
+    if fmt in NORMAL_FORMATS:
+        name, bits = NORMAL_FORMATS[fmt]
+        levels = (1 << bits) - 1
+        if meta.get("green") == "-y":
+            data = _flip_green(data[..., :3].astype(np.int64), levels)
+        out[name] = _normalise(data[..., :3].astype(np.float32) / levels * 2.0 - 1.0)
         return out
     q = meta["displacement"]
 

@@ -15,7 +15,8 @@ fragment                         shape
                                  the sidecar (d = offset + s q, q = (2^bits - 1) h);
                                  ``edge_length`` = one texel's mean object size
 ``mitsuba_restored.xml``         ``restored`` from the same map, ``levels="auto"``
-``mitsuba_normalmap.xml``        ``low.obj`` under ``mikk_normalmap`` (normal_tangent.png)
+``mitsuba_normalmap.xml``        ``low.obj`` under ``mikk_normalmap`` (normal_tangent.png,
+                                 ``green`` as baked)
 ``mitsuba_normalmap_stock.xml``  ``low.obj`` under Mitsuba's ``normalmap`` (normal_mitsuba.png)
 ===============================  ===========================================================
 
@@ -57,15 +58,16 @@ def _scene(shape: str) -> str:
     return f'<scene version="3.0.0">\n    {shape}\n</scene>\n'
 
 
-def _low_with(out_dir: Path, bsdf: str, map_file: str) -> str:
+def _low_with(out_dir: Path, bsdf: str, map_file: str, extra: str = "") -> str:
     texture = _BITMAP.format(name="normalmap", file=_path(out_dir / map_file))
     return (f'<shape type="obj"><string name="filename" value={_path(out_dir / "low.obj")}/>'
-            f'<bsdf type="{bsdf}">{texture}<bsdf type="diffuse"/></bsdf></shape>')
+            f'<bsdf type="{bsdf}">{extra}{texture}<bsdf type="diffuse"/></bsdf></shape>')
 
 
-def write_fragments(out_dir: Path, map_formats, low: MeshData) -> list[str]:
+def write_fragments(out_dir: Path, map_formats, low: MeshData, green: str = "+y") -> list[str]:
     """Write the fragments the bake's ``map_formats`` allow (see the module docstring);
-    returns their file names.  The maps and their sidecars must already be in ``out_dir``."""
+    returns their file names.  The maps and their sidecars must already be in ``out_dir``;
+    ``green``: the convention of ``normal_tangent.png``, passed on to ``mikk_normalmap``."""
     out_dir = Path(out_dir).resolve()
     written = {}
     disp = next((f for f in DISPLACEMENT_MAPS if f in map_formats), None)
@@ -85,7 +87,8 @@ def write_fragments(out_dir: Path, map_formats, low: MeshData) -> list[str]:
             f'<shape type="restored"><string name="map" value={_path(meta["_path"])}/>'
             f'<string name="levels" value="auto"/></shape>')
     if "normal_tangent" in map_formats:
-        written["mitsuba_normalmap.xml"] = _scene(_low_with(out_dir, "mikk_normalmap", "normal_tangent.png"))
+        written["mitsuba_normalmap.xml"] = _scene(_low_with(
+            out_dir, "mikk_normalmap", "normal_tangent.png", f'<string name="green" value="{green}"/>'))
     if "normal_mitsuba" in map_formats:
         written["mitsuba_normalmap_stock.xml"] = _scene(_low_with(out_dir, "normalmap", "normal_mitsuba.png"))
     for name, text in written.items():

@@ -1,7 +1,7 @@
 """``mikk_normalmap``: Mitsuba's ``normalmap`` BSDF decoding in the MikkTSpace frame.
 
 Used exactly like ``normalmap`` (nested BSDF, ``normalmap`` texture with ``raw``), but the
-texture's ``(x + 1) / 2`` colours are decoded in the MikkTSpace frame the baker (Blender,
+texture's ``(x + 1) / 2`` colours (``green="-y"``: DirectX, y negated) are decoded in the MikkTSpace frame the baker (Blender,
 Unity, Unreal) used: :func:`mi_displace.bake.mitsuba_frames.mikk_decode` with the per-vertex
 tangents our MikkTSpace port computes on the shape (:meth:`MikkNormalMap.prepare_shape`; the
 mi-displace loaders call it, Python users call
@@ -26,6 +26,7 @@ class MikkNormalMap(mi.BSDF):
     def __init__(self, props: mi.Properties, values: dict):
         super().__init__(props)
         self.normalmap = values["normalmap"]
+        self.flip_green = values["green"] == "-y"
         warn_if_srgb(self.normalmap, "mikk_normalmap", "normalmap")
         bsdfs = nested_objects(props, mi.BSDF)
         if len(bsdfs) != 1:
@@ -64,12 +65,14 @@ class MikkNormalMap(mi.BSDF):
                 warnings.warn(problem + "; rendering without the normal map")
                 mi.Log(mi.LogLevel.Warn, problem)
             return mi.Frame3f(si.sh_frame)
-        x = self.normalmap.eval_3(si, active) * 2.0 - 1.0
+        x = mi.Vector3f(self.normalmap.eval_3(si, active) * 2.0 - 1.0)
+        if self.flip_green:   # DirectX: G = 1 - G, so y = -y
+            x.y = -x.y
         shape = si.shape
         t = shape.eval_attribute_3(frames.ATTR_TANGENT, si, active)
         sign = shape.eval_attribute_1(frames.ATTR_SIGN, si, active)
         n = shape.eval_attribute_3(frames.ATTR_NORMAL, si, active)
-        result = mi.Frame3f(frames.mikk_decode(mi.Vector3f(x), mi.Vector3f(t), sign, mi.Vector3f(n)))
+        result = mi.Frame3f(frames.mikk_decode(x, mi.Vector3f(t), sign, mi.Vector3f(n)))
         result.s = dr.normalize(si.dp_du - result.n * dr.dot(result.n, si.dp_du))
         result.t = dr.cross(result.n, result.s)
         return result

@@ -30,6 +30,7 @@ import mitsuba as mi
 import numpy as np
 from scipy.ndimage import binary_erosion
 
+from mi_displace.bake.formats import read_metadata
 from mi_displace.bake.meshdata import MeshData, load_mesh, save_obj, vertex_normals
 from mi_displace.bake.mitsuba_frames import prepare_scene
 from mi_displace.bake.uv_raster import UVLayout, rasterize_rows
@@ -66,7 +67,7 @@ def _scene(shape: dict, centre, radius: float, res: int, light_dir) -> mi.Scene:
 
 
 def decoded_normals(out_dir, bsdf_type: str, map_file: str, low: MeshData, width: int,
-                    height: int, to_world: np.ndarray | None = None
+                    height: int, to_world: np.ndarray | None = None, green: str = "+y"
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World normals the BSDF shades with at every texel centre inside a UV triangle.
 
@@ -77,19 +78,21 @@ def decoded_normals(out_dir, bsdf_type: str, map_file: str, low: MeshData, width
     Args:
         out_dir: the bake's folder (``low.obj``, ``map_file``); bsdf_type: ``mikk_normalmap``
             or ``normalmap``; low: the bake's low-poly; width, height: the map's size [texels];
-            to_world: (4, 4) similarity placing ``low.obj`` (None: identity); the rays follow.
+            to_world: (4, 4) similarity placing ``low.obj`` (None: identity); the rays follow;
+            green: the map's green convention, given to ``mikk_normalmap``.
 
     Returns:
         texel indices (N,) (row-major, row 0 on top), decoded unit normals (N, 3) in world
         space, and (N,) bool: the ray met the texel's own triangle and the BSDF kept the
         reflection."""
     m = np.eye(4) if to_world is None else np.asarray(to_world, np.float64)
+    extra = {"green": green} if bsdf_type == "mikk_normalmap" else {}
     scene = mi.load_dict({"type": "scene", "low": {
         "type": "obj", "filename": str(Path(out_dir) / "low.obj"),
         "to_world": mi.ScalarTransform4f(mi.ScalarMatrix4f(m.tolist())),
         "bsdf": {"type": bsdf_type, "normalmap": {"type": "bitmap", "raw": True,
                                                   "filename": str(Path(out_dir) / map_file)},
-                 "nested": {"type": "conductor"}}}})
+                 "nested": {"type": "conductor"}, **extra}}})
     prepare_scene(scene)
     s = rasterize_rows(UVLayout(low), width, height, 0, height, 1, conservative=False)
     texel, f = np.asarray(s.texel, np.int64), np.asarray(s.prim, np.int64)
@@ -129,7 +132,8 @@ def decode_errors(out_dir, low: MeshData, normal_object: np.ndarray, measured: n
     for way, (plugin, map_file) in DECODES.items():
         if not (Path(out_dir) / map_file).is_file():
             continue
-        texel, n, ok = decoded_normals(out_dir, plugin, map_file, low, W, H)
+        green = read_metadata(Path(out_dir) / map_file).get("green", "+y")
+        texel, n, ok = decoded_normals(out_dir, plugin, map_file, low, W, H, green=green)
         use = ok & measured.ravel()[texel]
         truth = normal_object.reshape(-1, 3)[texel[use]].astype(np.float64)
         err = np.degrees(np.arctan2(np.linalg.norm(np.cross(n[use], truth), axis=1),

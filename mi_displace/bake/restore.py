@@ -1,7 +1,7 @@
 """Model restoration (§5): subdivide the low-poly, displace the new vertices from the map.
 
 1. **Subdivision** (Fig. 10) — ``levels`` rounds of 1 -> 4 midpoint subdivision, i.e. every
-   triangle split into 4^levels on a barycentric grid (:func:`tessellate.subdivision_topology`
+   triangle split into 4^levels on a barycentric grid (:func:`mi_displace.core.tessellate.subdivision_topology`
    with 2^levels edge splits), or, with ``split = N``, the uniform 1 -> N^2 pattern directly
    (N = 3 is the ternary 1 -> 9 split, a pattern no power of two reaches).
 2. **Alias buffers** — twins (vertices at the same position with different UVs, from UV seams)

@@ -86,6 +86,15 @@ class HighPoly:
         self.vertex_normals = mi.Vector3f(*(dr.gather(mi.Float, vn, dr.arange(mi.UInt32, V) * 3 + k)
                                             for k in range(3)))
         self.faces = mi.Vector3u(*[mi.UInt32(np.ascontiguousarray(faces[:, k])) for k in range(3)])
+        self.positions = _vec(positions, mi.Point3f)
+        self.welded = (positions, faces)   # (V, 3) float32, (F, 3) uint32: one vertex per position
+
+    def point(self, prim: mi.UInt32, bary: mi.Point2f, active: mi.Bool) -> mi.Point3f:
+        """The high-poly point of triangle ``prim`` at barycentrics (b1, b2) = ``bary``."""
+        f = [dr.gather(mi.UInt32, self.faces[k], prim, active) for k in range(3)]
+        return (gather(mi.Point3f, self.positions, f[0], active) * (1.0 - bary.x - bary.y)
+                + gather(mi.Point3f, self.positions, f[1], active) * bary.x
+                + gather(mi.Point3f, self.positions, f[2], active) * bary.y)
 
     def shading_normal(self, prim: mi.UInt32, b1: mi.Float, b2: mi.Float,
                        active: mi.Bool) -> mi.Vector3f:
@@ -149,6 +158,9 @@ class TraceResult:
     normal_mitsuba: mi.Vector3f     # the same in Mitsuba's normalmap frame (s, t, n), unit
     direction_tangent: mi.Vector3f  # displacement direction in the tangent frame, unit
     back_depth: mi.Float | None     # dual-depth: signed displacement of the surface behind
+    prim_high: mi.UInt32            # the high-poly triangle hit (valid where ``found``)
+    bary_high: mi.Point2f           # its barycentrics (b1, b2) at the hit
+    found: mi.Bool                  # a high-poly surface was hit within range
 
 
 def _tangent_space(t, b, n, v):
@@ -239,4 +251,4 @@ def trace(high: HighPoly, low: LowPolyDevice, prim, b1, b2, max_distance: float,
     s_m, t_m = low.stock_frame(prim, n)
     n_mitsuba = mi.Vector3f(dr.dot(n_high, s_m), dr.dot(n_high, t_m), dr.dot(n_high, n))
     return TraceResult(status, d, n_high, _tangent_space(t, b, n_raw, n_high), n_mitsuba,
-                       dir_ts, back)
+                       dir_ts, back, prim_h, mi.Point2f(uv_h), found)

@@ -61,6 +61,8 @@ class Samples:
         texel: mi.UInt32 (n,) texel index inside the block (row-major, row - row0).
         prim: mi.UInt32 (n,) low-poly triangle.
         b1, b2: mi.Float (n,) barycentrics of vertices 1 and 2 (b0 = 1 - b1 - b2).
+        sub: mi.UInt32 (n,) sub-sample of the texel's aa x aa grid (aa * aa for a corner
+            probe's sample): with the global texel index a key unique in the whole map.
         conservative: number of samples added by the corner probes.
     """
 
@@ -68,6 +70,7 @@ class Samples:
     prim: mi.UInt32
     b1: mi.Float
     b2: mi.Float
+    sub: mi.UInt32
     conservative: int
 
 
@@ -102,6 +105,7 @@ def rasterize_rows(layout: UVLayout, width: int, height: int, row0: int, rows: i
     hit = dr.compress(pi.is_valid())
     # = texel[hit] (a gather from the counter would bake its size into the kernel)
     texel_h = hit // (A * A) if dr.width(hit) else dr.zeros(mi.UInt32, 0)
+    sub_h = hit % (A * A) if dr.width(hit) else dr.zeros(mi.UInt32, 0)
     prim = dr.gather(mi.UInt32, pi.prim_index, hit)
     b1 = dr.gather(mi.Float, pi.prim_uv.x, hit)
     b2 = dr.gather(mi.Float, pi.prim_uv.y, hit)
@@ -140,9 +144,10 @@ def rasterize_rows(layout: UVLayout, width: int, height: int, row0: int, rows: i
                                 1.0 - (dr.gather(mi.Float, br, keep) + 0.5) / H)
             cb1, cb2 = _clamped_barycentrics(layout, tri, centre)
             texel_h = _append(texel_h, dr.gather(mi.UInt32, band, keep))
+            sub_h = _append(sub_h, dr.full(mi.UInt32, 1, added) * (A * A))
             prim = _append(prim, tri)
             b1, b2 = _append(b1, cb1), _append(b2, cb2)
-    return Samples(texel_h, prim, b1, b2, int(added))
+    return Samples(texel_h, prim, b1, b2, sub_h, int(added))
 
 
 def _append(a, b):

@@ -54,7 +54,8 @@ import numpy as np
 from mi_displace.bench._timing import output_dir, print_record
 from mi_displace.core import tessellate
 from mi_displace.core.texture_height import height_function
-from mi_displace.inverse import figures, gradcheck, recover
+from mi_displace.figures.inverse import write
+from mi_displace.inverse import gradcheck, recover
 
 
 class Sizes(NamedTuple):
@@ -337,8 +338,7 @@ def run(out: Path, sizes: Sizes = FULL) -> dict:
         shadows = shadow_checks(sizes)
     rec = recover.recover(truth, iterations=sizes.iterations, integrator="prb_projective",
                           image_size=sizes.recovery_image)
-    (out / "recovery").mkdir(exist_ok=True)
-    figures.write(rec, out / "recovery")
+    write(rec, out / "recovery")
     eye = [r["rel_error"] for r in procedural if r["light"] == "eye"]
     summary = {
         "faces": big["faces"], "forward_s": big["forward_s"], "backward_s": big["backward_s"],

@@ -164,7 +164,7 @@ class DisplacedSurface:
     def build(self, name: str | None = None):
         """(Tessellation in object units, stats) for the current parameters (uniform or diced).
 
-        ``scale`` and ``midlevel`` enter the kernels as the traversed ``mi.Float``s, so a
+        ``scale`` and ``midlevel`` enter the kernels as the traversed ``mi.Float`` values, so a
         gradient enabled on them (or on the height texture's data) reaches the vertices."""
         if self.dicing:
             return self._dice(self.name if name is None else name)

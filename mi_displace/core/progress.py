@@ -40,7 +40,7 @@ from dataclasses import dataclass
 PREFIX = "[mi-displace]"
 ENV = "MI_DISPLACE_PROGRESS"
 
-#: The package's logger: every stage line is an INFO record of it.
+#: The package's logger; every stage line is an INFO record of it.
 LOGGER = logging.getLogger("mi_displace")
 LOGGER.addHandler(logging.NullHandler())
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import mitsuba as mi
 
-#: Marks a parameter without a default: reading fails when it is missing.
+#: Marks a parameter without a default; reading fails when it is missing.
 REQUIRED = type("Required", (), {"__repr__": lambda self: "required"})()
 
 _TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
@@ -83,7 +83,7 @@ class Param:
     def range_text(self) -> str:
         """The accepted values, as the reference prints them."""
         if self.choices:
-            text = " | ".join(self.choices)
+            text = ", ".join(self.choices)
         elif self.low is not None or self.high is not None:
             lo = "(-inf" if self.low is None else f"{'(' if self.open_low else '['}{self.low:g}"
             hi = "inf)" if self.high is None else f"{self.high:g}{')' if self.open_high else ']'}"

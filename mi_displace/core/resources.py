@@ -14,7 +14,7 @@ from __future__ import annotations
 from importlib.resources import files
 from pathlib import Path
 
-#: Default output folder of the figure commands and benches: ``docs/figures`` under the
+#: Default output folder of the figure commands and benches, ``docs/figures`` under the
 #: current directory (the repository's own docs when run from the checkout's root).
 FIGURES_DIR = Path("docs") / "figures"
 

@@ -584,7 +584,7 @@ def choosing_markdown(record: dict, scenes_dir=None) -> str:
     budgets = budget_table(results, scenes_dir=scenes_dir)
     lines = [
         "# Choosing a technique", "",
-        "Generated from the trade-off atlas ([the atlas page](atlas/index.html), "
+        "Generated from the trade-off atlas (<a href=\"atlas/index.html\">the atlas page</a>, "
         "`docs/atlas/atlas.json`) by `python -m mi_displace.evaluate.atlas`; do not edit by "
         "hand.  Every number is measured; the atlas is re-made (minutes to an hour) by:", "",
         "```console", _remake_command(record), "```", "",
@@ -594,7 +594,8 @@ def choosing_markdown(record: dict, scenes_dir=None) -> str:
         "render time of one path sample per pixel measured in the same run.  *pick* is the "
         "most accurate option within the budget: an approximation by its technique name, "
         "path tracing raw (`path N spp`) or denoised (`path N spp + OIDN`). Only budgets "
-        "within which something renders are listed; [the atlas page](atlas/index.html) has "
+        "within which something renders are listed; "
+        "<a href=\"atlas/index.html\">the atlas page</a> has "
         "every option with its image and the verdict sentences.", ""]
     for kind in BASE_KINDS:
         names = [n for n in results if facts[n]["base_kind"] == kind]

@@ -256,7 +256,7 @@ def _cache_write(cache_dir: Path, key: str, record: dict) -> None:
 
 def measure_point(scene_path: str, xml_params: dict, integrator: str, spp: int | None,
                   warm_repeats: int, mode: str, edits: dict, inspect=None) -> dict:
-    """One sweep point: :func:`compare.measure_approximation` (a job of :func:`run_jobs`)."""
+    """One sweep point: :func:`compare.measure_approximation` (a job of :func:`jobs.run_jobs`)."""
     return cmp.measure_approximation(scene_path, xml_params, integrator, spp, warm_repeats,
                                      mode=mode, edits=edits, inspect=inspect)
 

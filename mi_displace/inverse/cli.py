@@ -51,27 +51,24 @@ def add_commands(sub) -> dict:
 
 
 def _recover(args) -> int:
-    from mi_displace.inverse import figures, recover
+    from mi_displace.figures.inverse import write
+    from mi_displace.inverse import recover
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     truth = recover.load_height_map(size=args.map_size)
     rec = recover.recover(truth, iterations=args.iterations, views=args.views,
                           lights=args.lights, image_size=args.image_size, spp=args.spp,
                           integrator=args.integrator, learning_rate=args.learning_rate, log=print)
-    figures.write(rec, out)
+    write(rec, Path(args.out))
     print(json.dumps(rec.summary(), indent=2))
     return 0
 
 
 def _recover_bunny(args) -> int:
-    from mi_displace.inverse import bunny, figures
+    from mi_displace.figures.inverse import BUNNY_LABELS, write
+    from mi_displace.inverse import bunny
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     rec = bunny.recover_bunny(iterations=args.iterations, learning_rate=args.learning_rate,
                               log=print)
-    figures.write(rec, out, truth_label="baked (mi-displace bake)",
-                  error_label="map error vs baked / range")
+    write(rec, Path(args.out), **BUNNY_LABELS)
     print(json.dumps(rec.summary(), indent=2))
     return 0

@@ -5,7 +5,9 @@
   cup of :func:`mi_displace.slicing.assets.cup_mesh`) on a cube around it, written as
   ``DIR/cube.json`` + EXR/PNG files for ``<shape type="depth_object">``.
 * ``slicing-cup --out FILE.ply``: write the procedural cup mesh.
-* ``slicing-figures [--quick] [--out DIR]``: the measured figures of docs/slicing.md.
+
+The measured figures of docs/slicing.md: ``mi-displace figures slicing``
+(:mod:`mi_displace.figures.slicing`).
 """
 from __future__ import annotations
 
@@ -46,13 +48,6 @@ def _cmd_cup(args) -> int:
     return 0
 
 
-def _cmd_figures(args) -> int:
-    from mi_displace.slicing import figures
-
-    figures.main(out=args.out, quick=args.quick)
-    return 0
-
-
 def add_commands(sub) -> dict:
     p = sub.add_parser("slicing-capture", help="six orthographic colour+depth images of a mesh")
     p.add_argument("source", help="PLY/OBJ mesh, or 'cup' (the procedural cup)")
@@ -61,7 +56,4 @@ def add_commands(sub) -> dict:
     p.add_argument("--color", type=_color, default=[0.7, 0.7, 0.7], help="diffuse albedo R,G,B")
     p = sub.add_parser("slicing-cup", help="write the procedural cup mesh")
     p.add_argument("--out", type=Path, required=True, help="output .ply")
-    p = sub.add_parser("slicing-figures", help="the measured figures of docs/slicing.md")
-    p.add_argument("--out", type=Path, default=Path("docs/figures"), help="output folder")
-    p.add_argument("--quick", action="store_true", help="fewer points, smaller images")
-    return {"slicing-capture": _cmd_capture, "slicing-cup": _cmd_cup, "slicing-figures": _cmd_figures}
+    return {"slicing-capture": _cmd_capture, "slicing-cup": _cmd_cup}

@@ -230,15 +230,16 @@ class MesostructureBSDF(mi.BSDF):
         if ctx.mode != mi.TransportMode.Importance:
             return self._eval_radiance(ctx, si, wo, active)
         # adjoint transport (ptracer): the path towards the sensor leaves along wo, so wo
-        # is the view (T', silhouettes) and si.wi the light; the value is the radiance
-        # one with the roles swapped, times Veach's shading-normal correction
-        # |wo.Ng| / |wi.Ng| (the meso normal is a shading normal of the coarse mesh)
+        # is the view (T', silhouettes) and si.wi the light.  Mitsuba's ptracer applies
+        # Veach's shading-normal correction between si.sh_frame and the geometric normal
+        # itself, so the meso normal needs it only relative to si.sh_frame:
+        # f*(wi -> wo) = f(wo -> wi) |wi . n_m| |wo . n_s| / |wi . n_s| (Veach 1997, §5.3)
         si_v = mi.SurfaceInteraction3f(si)
         si_v.wi = wo
         radiance = mi.BSDFContext(mi.TransportMode.Radiance, ctx.type_mask, ctx.component)
         f = self._eval_radiance(radiance, si_v, si.wi, active)
-        ng = si.to_local(si.n)
-        correction = dr.abs(dr.dot(wo, ng)) / dr.maximum(dr.abs(dr.dot(si.wi, ng)), 1e-6)
+        cos_light = dr.abs(mi.Frame3f.cos_theta(si.wi))
+        correction = dr.select(cos_light > 0, dr.abs(mi.Frame3f.cos_theta(wo)) / cos_light, 0.0)
         return f * correction
 
     @collector_paused

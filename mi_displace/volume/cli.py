@@ -4,14 +4,12 @@
   [-D k=v] [--spp N] --out DIR``: a progressing cut or peel (Figs. 1, 6) in one call:
   ``animate --edit PARAM=START:STOP --endpoint`` (the parameter stepped through
   ``mi.traverse``, the object textures not rebuilt; 1 spp unless ``--spp``).
-* ``volume-figures [--out DIR] [--quick]``: the sweeps of docs/volume.md
-  (:mod:`mi_displace.volume.figures`).
+
+The sweeps of docs/volume.md: ``mi-displace figures volume`` (:mod:`mi_displace.figures.volume`).
 """
 from __future__ import annotations
 
 from pathlib import Path
-
-from mi_displace.core.resources import FIGURES_DIR
 
 
 def _cmd_animate(args) -> int:
@@ -20,14 +18,6 @@ def _cmd_animate(args) -> int:
 
     return run_animation(args, [parse_edit(f"{args.param}={args.start}:{args.stop}")],
                          endpoint=True, spp=1)
-
-
-def _cmd_figures(args) -> int:
-    from mi_displace.volume.figures import write_figures
-
-    record = write_figures(args.out, quick=args.quick)
-    print(f"wrote {args.out}/volume_figures.json and volume_figures.md ({len(record)} tables)")
-    return 0
 
 
 def add_commands(sub) -> dict:
@@ -40,8 +30,4 @@ def add_commands(sub) -> dict:
     p.add_argument("--start", type=float, required=True, help="first value")
     p.add_argument("--stop", type=float, required=True, help="last value")
     animation_options(p, frames=12)
-
-    p = sub.add_parser("volume-figures", help="volume trade-off sweeps (docs/volume.md)")
-    p.add_argument("--out", type=Path, default=FIGURES_DIR, help="output folder")
-    p.add_argument("--quick", action="store_true", help="small images and references")
-    return {"volume-animate": _cmd_animate, "volume-figures": _cmd_figures}
+    return {"volume-animate": _cmd_animate}

@@ -14,8 +14,11 @@ def _maps(h=16, w=24, seed=0):
         v = rng.normal(size=(h, w, 3))
         v[..., 2] = np.abs(v[..., 2]) + z_min
         return (v / np.linalg.norm(v, axis=-1, keepdims=True)).astype(np.float32)
+    curvature = rng.uniform(-3.0, 3.0, (h, w)).astype(np.float32)
     return {"displacement": d, "normal_tangent": unit(0.5), "normal_object": unit(-1.0),
-            "normal_mitsuba": unit(0.5), "direction_tangent": unit(0.5), "back_depth": (d - 0.2).astype(np.float32)}
+            "normal_mitsuba": unit(0.5), "direction_tangent": unit(0.5), "back_depth": (d - 0.2).astype(np.float32),
+            "ao": rng.uniform(0, 1, (h, w)).astype(np.float32), "curvature": curvature,
+            "cavity": np.clip(-curvature / 3.0, 0, 1), "albedo": rng.uniform(0, 1, (h, w, 3)).astype(np.float32)}
 
 
 #: displacement bits of each quantised format (the §1.2 table), independent of the sidecar
@@ -27,7 +30,7 @@ def check_round_trip(tmp_path, fmt):
     """Write and read ``fmt``; displacement within half of the step the format's bit depth
     gives over the input's own range (not the step the sidecar claims)."""
     maps = _maps()
-    path = formats.write_map(tmp_path, fmt, maps, {"low": "low.obj"})
+    path = formats.write_map(tmp_path, fmt, maps, {"low": "low.obj", "curvature_range": 3.0})
     meta = json.loads((tmp_path / (path.name + ".json")).read_text())
     assert meta["format"] == fmt and meta["width"] == 24 and meta["height"] == 16
     out = formats.read_map(path)
@@ -38,6 +41,13 @@ def check_round_trip(tmp_path, fmt):
         err = np.abs(out["displacement"] - d).max()
         assert err <= 0.5 * step + 1e-6, (fmt, err, step)
         assert np.all(np.isfinite(out["displacement"]))
+    # surface maps: 16-bit PNGs within half a step of their encoding (curvature over its
+    # range 3, the sidecar's H_ref: |H| <= 3 here), floats exact; sRGB albedo within 1e-4
+    name = fmt.removesuffix("_float")
+    if out.get(name) is not None and name in ("ao", "curvature", "cavity", "albedo"):
+        step = 0.0 if fmt.endswith("_float") else 0.5 / 65535 * (6.0 if name == "curvature" else 1.0)
+        tol = 1e-4 if name == "albedo" and step else step + 1e-6
+        assert np.abs(out[name] - maps[name]).max() <= tol, (fmt, np.abs(out[name] - maps[name]).max())
     one_byte = 2.0 / 255  # one 8-bit step of a [-1, 1] component
     for key in ("normal_tangent", "direction_tangent", "back_depth", "normal_object", "normal_mitsuba"):
         if out.get(key) is not None:

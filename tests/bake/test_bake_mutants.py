@@ -448,7 +448,9 @@ def test_a_constant_map_round_trips_in_every_format(tmp_path):
 
     n = np.dstack([np.zeros((4, 6, 2)), np.ones((4, 6, 1))]).astype(np.float32)
     maps = {"displacement": np.full((4, 6), 0.25, np.float32), "normal_tangent": n,
-            "normal_object": n, "normal_mitsuba": n, "direction_tangent": n, "back_depth": np.full((4, 6), 0.25, np.float32)}
+            "normal_object": n, "normal_mitsuba": n, "direction_tangent": n, "back_depth": np.full((4, 6), 0.25, np.float32),
+            "ao": np.full((4, 6), 0.5, np.float32), "curvature": np.zeros((4, 6), np.float32),
+            "cavity": np.zeros((4, 6), np.float32), "albedo": np.full((4, 6, 3), 0.5, np.float32)}
     import warnings
 
     for fmt in formats.FORMATS:
@@ -461,6 +463,9 @@ def test_a_constant_map_round_trips_in_every_format(tmp_path):
         if out["displacement"] is not None:
             assert out["valid"] is None               # no mask named by this sidecar
             assert np.allclose(out["displacement"], 0.25, atol=1e-7), fmt
+        name = fmt.removesuffix("_float")
+        if name in ("ao", "curvature", "cavity", "albedo"):   # a flat surface map: its constant
+            assert np.allclose(out[name], maps[name], atol=1e-4), fmt
 
 
 def test_overlap_count_is_the_texel_centres_inside_both_triangles(variant):

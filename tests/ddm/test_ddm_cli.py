@@ -25,13 +25,3 @@ def test_ddm_animate_bad_shape_id(variant_llvm, tmp_path, capsys):
         cli.main(["ddm-animate", str(SCENES / "ddm_teapot_morph.xml"), "--shape", "nope",
                   "-D", "res=16", "--out", str(tmp_path)])
     assert e.value.code == 2 and "nope" in capsys.readouterr().err
-
-
-@pytest.mark.slow
-def test_ddm_figures_quick(variant_llvm, tmp_path):
-    assert cli.main(["ddm-figures", "--quick", "--out", str(tmp_path)]) == 0
-    for name in ("ddm_accuracy.png", "ddm_sweep.png", "ddm_maps.png", "ddm_figures.md"):
-        assert (tmp_path / name).is_file()
-    record = json.loads((tmp_path / "ddm_figures.json").read_text())
-    rms = [r["rms_error_rel"] for r in record["accuracy"]]
-    assert rms == sorted(rms, reverse=True)

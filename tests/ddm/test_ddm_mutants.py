@@ -196,38 +196,6 @@ def test_hex_rows_alternate_their_shift_and_gaps_shrink_hexagons():
         assert np.allclose(o[j, :, 1] + sv / 2, (j + 0.5) * cv), j
 
 
-# --- ddm/model.py --------------------------------------------------------------------------
-
-def test_config_defaults_are_the_documented_ones():
-    """The parameter table of docs/ddm.md ("name | type, default | meaning") is the
-    interface: every default it states is DDMConfig's (or its Animation's)."""
-    from pathlib import Path
-
-    from mi_displace.ddm.animation import Animation
-    from mi_displace.ddm.model import DDMConfig
-
-    cfg, animation = DDMConfig(), Animation()
-    text = (Path(__file__).resolve().parents[2] / "docs" / "ddm.md").read_text()
-    checked = 0
-    for line in text.splitlines():
-        cells = [c.strip() for c in line.split("|")[1:-1]]
-        if len(cells) != 3 or not cells[0].startswith("`"):
-            continue
-        names = [n.strip("` ") for n in cells[0].split(",")]
-        typ, *defaults = [d.strip() for d in cells[1].split(",")]
-        if typ not in ("string", "int", "float") or len(defaults) < len(names):
-            continue
-        for name, doc in zip(names, defaults):
-            owner = cfg if hasattr(cfg, name) else animation
-            value = getattr(owner, name)
-            if typ == "string":
-                assert value == (None if doc == "none" else doc.strip("`")), name
-            else:
-                assert value == pytest.approx(float(doc)), name
-            checked += 1
-    assert checked >= 20      # 22 today: every row that states a default
-
-
 # --- ddm/charts.py -------------------------------------------------------------------------
 
 from pathlib import Path  # noqa: E402

@@ -17,7 +17,10 @@ import numpy as np
 from mi_displace.bench.peers import PeerUnavailable
 
 #: The maps :mod:`.blender_side` bakes, each (H, W, 4) float32, row 0 = top (v = 1).
-MAPS = ("normal_tangent", "normal_object", "position_high", "position_low", "normal_low")
+MAPS = ("normal_tangent", "normal_object", "position_high", "position_low", "normal_low",
+        "normal_tangent_directx")
+#: the maps it bakes too when given AO settings
+AO_MAPS = ("ao", "pointiness")
 
 
 def python() -> str:
@@ -35,17 +38,23 @@ def python() -> str:
     return name
 
 
-def bake(high_obj: Path, low_obj: Path, res: int, max_distance: float, out_dir: Path) -> dict:
+def bake(high_obj: Path, low_obj: Path, res: int, max_distance: float, out_dir: Path,
+         ao_samples: int = 0, ao_distance: float = 1.0, texture: Path | None = None) -> dict:
     """Cycles' selected-to-active bakes of ``high_obj`` onto ``low_obj`` (OBJ files) at
-    ``res`` x ``res`` texels with cage extrusion ``max_distance`` (object units).
+    ``res`` x ``res`` texels with cage extrusion ``max_distance`` (object units); with
+    ``ao_samples``, also AO (that many samples, rays of ``ao_distance``) and pointiness;
+    with ``texture`` (an sRGB image for the high-poly's UVs), only ``albedo``.
 
     Returns:
         ``{"maps": {name: (res, res, 4) float32 for name in MAPS}, "version": Blender's,
         "seconds": {name: seconds of its bpy.ops.object.bake call}}``.
     """
     subprocess.run([python(), str(Path(__file__).with_name("blender_side.py")), str(high_obj),
-                    str(low_obj), str(res), repr(max_distance), str(out_dir)],
+                    str(low_obj), str(res), repr(max_distance), str(out_dir),
+                    *(["albedo", str(texture)] if texture is not None else
+                      [str(ao_samples), repr(ao_distance)] if ao_samples else [])],
                    check=True, capture_output=True)
     record = json.loads((out_dir / "blender.json").read_text())
-    return {"maps": {name: np.load(out_dir / f"{name}.npy") for name in MAPS},
+    names = ("albedo",) if texture is not None else MAPS + (AO_MAPS if ao_samples else ())
+    return {"maps": {name: np.load(out_dir / f"{name}.npy") for name in names},
             "version": record["version"], "seconds": record["seconds"]}

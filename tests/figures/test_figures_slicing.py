@@ -1,7 +1,7 @@
-"""The donut table of slicing-figures from a tradeoff result: failed points left out, bytes
+"""The donut table of `figures slicing` from a tradeoff result: failed points left out, bytes
 and auto's slice count from the points' build_stats, the path curve appended."""
 from mi_displace.evaluate import tradeoff as tr
-from mi_displace.slicing import figures
+from mi_displace.figures import slicing as figures
 
 
 def _point(point, ok=True, **stats):

@@ -1,6 +1,6 @@
 """The VDM figure's sweep points (one tradeoff over explicit points): every term pair and
 every table size once, the paper's sizes shared between the two tables."""
-from mi_displace.vdm import figures
+from mi_displace.figures import vdm as figures
 
 
 def test_sweep_points_cover_each_value_once():

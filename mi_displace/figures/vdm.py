@@ -1,6 +1,6 @@
 """Figures and trade-off sweeps of the VDM docs (``docs/figures/vdm_*``).
 
-``python -m mi_displace.vdm.figures [--out docs/figures] [--quick] [--res N]`` writes:
+``mi-displace figures vdm [--out docs/figures] [--quick] [--res N] [--only PART]`` writes:
 
 * ``vdm_methods_{torus,spot}.png/.json/.md``: reference | bump | horizon | relief | VDM
   (raster), FLIP per method inside the masks (:func:`mi_displace.vdm.methods.methods_table`,
@@ -20,15 +20,16 @@
 The reference of every number is true displacement under the same raster integrator (256²,
 4 × 4 samples per pixel); nothing is drawn by hand.  The cold build time of a table size is
 a build from scratch only when the VDM table cache (``$MI_DISPLACE_CACHE/vdm``) is empty.
+``--quick``: 32² images, 16³-texel tables (``vdm_res`` 16), one timed render per method, the
+reduced sweeps of :func:`sweep_points`.
 """
 from __future__ import annotations
 
-import argparse
 import gc
 import json
 from pathlib import Path
 
-from mi_displace.core.resources import FIGURES_DIR, scene_path
+from mi_displace.core.resources import scene_path
 
 SCENES = {"torus": scene_path("vdm_torus.xml"), "spot": scene_path("vdm_spot.xml")}
 
@@ -39,14 +40,19 @@ def _save_json(path: Path, data) -> None:
     path.write_text(json.dumps(_finite_or_none(data), indent=2))
 
 
-def methods_figure(name: str, out: Path, res: int) -> dict:
+#: the scene parameters of ``--quick`` (besides the image size): small VDM tables
+QUICK_PARAMS = {"vdm_res": "16"}
+
+
+def methods_figure(name: str, out: Path, res: int, quick: bool = False) -> dict:
     """Panel of every method on one scene plus the measured table."""
     from matplotlib.figure import Figure
 
     from mi_displace.core.io import to_srgb
     from mi_displace.vdm import methods
 
-    result = methods.methods_table(SCENES[name], {"res": str(res)}, repeats=3)
+    params = dict(QUICK_PARAMS if quick else {}, res=str(res))
+    result = methods.methods_table(SCENES[name], params, repeats=1 if quick else 3)
     rows = {r["method"]: r for r in result["rows"]}
     order = ["reference", "bump", "horizon", "relief", "approximation"]
     fig = Figure(figsize=(3 * len(order), 3.4))
@@ -70,7 +76,7 @@ UNSEEN = {"grazing": scene_path("vdm_bricks_grazing.xml"),
 GRAZING_ANGLES = (45, 70, 82, 85)
 
 
-def unseen(out: Path, res: int) -> list[dict]:
+def unseen(out: Path, res: int, quick: bool = False) -> list[dict]:
     """Every method on the unseen-style scenes; one Markdown table per scene/angle."""
     from mi_displace.vdm import methods
 
@@ -78,7 +84,8 @@ def unseen(out: Path, res: int) -> list[dict]:
              for a in GRAZING_ANGLES] + [("vdm_corner_normals", UNSEEN["corners"], {})]
     records, text = [], []
     for title, path, params in cases:
-        result = methods.methods_table(path, dict(params, res=str(res)), repeats=3)
+        result = methods.methods_table(path, dict(params, **(QUICK_PARAMS if quick else {}),
+                                                  res=str(res)), repeats=1 if quick else 3)
         records.append({"case": title, "rows": result["rows"],
                         "mask_pixels": result["mask_pixels"]})
         text += [f"### {title}", "", methods.markdown(result["rows"]), "",
@@ -187,28 +194,31 @@ def _plot_sweeps(out: Path, result: dict, terms: list[dict], sizes: list[dict]) 
     fig.savefig(out / "vdm_sweep.png", dpi=110)
 
 
-def main(argv=None) -> int:
-    import mi_displace
+PARTS = ("methods", "unseen", "sweeps")
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default=str(FIGURES_DIR))
-    parser.add_argument("--res", type=int, default=256)
-    parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--only", choices=("methods", "sweeps", "unseen"), default=None)
-    args = parser.parse_args(argv)
-    mi_displace.init()
+
+def add_options(parser) -> None:
+    parser.add_argument("--res", type=int, default=None,
+                        help="image size (default 256, 32 with --quick)")
+    parser.add_argument("--only", choices=PARTS, action="append", default=None,
+                        help="only this part (repeatable; default: all)")
+
+
+def run(args) -> int:
+    """``mi-displace figures vdm``: the files of the module docstring under ``args.out``."""
+    res = args.res or (32 if args.quick else 256)
+    if res < 8:
+        raise ValueError(f"--res: must be at least 8, got {res}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    if args.only in (None, "methods"):
+    parts = args.only or PARTS
+    if "methods" in parts:
         for name in SCENES:
-            methods_figure(name, out, args.res)
+            methods_figure(name, out, res, args.quick)
             gc.collect()
-    if args.only in (None, "unseen"):
-        unseen(out, args.res)
-    if args.only in (None, "sweeps"):
-        sweeps(out, args.res, args.quick)
+    if "unseen" in parts:
+        unseen(out, res, args.quick)
+    if "sweeps" in parts:
+        sweeps(out, res, args.quick)
+    print(f"wrote the VDM {', '.join(parts)} files under {out}")
     return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,4 +1,4 @@
-"""The measured figures of docs/slicing.md (``mi-displace slicing-figures [--quick]``).
+"""The measured figures of docs/slicing.md (``mi-displace figures slicing [--quick] [--only PART]``).
 
 Every measurement is :func:`mi_displace.evaluate.tradeoff.tradeoff` on a comparison scene
 (the approximation under the scene's ``raster`` at every point, warm time the median of 3
@@ -217,13 +217,13 @@ def plot(out: Path, results: dict) -> None:
         fig.savefig(out / "slicing_depth.png", dpi=110)
 
 
-def main(out=Path("docs/figures"), quick: bool = False, which=("fig10", "tradeoff", "depth"),
-         cache_dir=None) -> dict:
-    import mi_displace
+PARTS = ("fig10", "tradeoff", "depth")
 
+
+def write_figures(out, quick: bool = False, which=PARTS, cache_dir=None) -> dict:
+    """The parts ``which`` of :data:`PARTS`: ``<out>/slicing_<part>.json`` and the plots."""
     from mi_displace.evaluate.compare import _finite_or_none
 
-    mi_displace.init()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     results = {}
@@ -231,14 +231,19 @@ def main(out=Path("docs/figures"), quick: bool = False, which=("fig10", "tradeof
         if key in which:
             results[key] = fn(quick, cache_dir)
             (out / f"slicing_{key}.json").write_text(json.dumps(_finite_or_none(
-                {"command": f"mi-displace slicing-figures{' --quick' if quick else ''}",
+                {"command": f"mi-displace figures slicing{' --quick' if quick else ''}",
                  "variant": mi.variant(), **results[key]}), indent=1))
     plot(out, results)
     return results
 
 
-if __name__ == "__main__":
-    import sys
+def add_options(parser) -> None:
+    parser.add_argument("--only", choices=PARTS, action="append", default=None,
+                        help="only this part (repeatable; default: all)")
 
-    main(quick="--quick" in sys.argv,
-         which=tuple(a for a in sys.argv[1:] if not a.startswith("--")) or ("fig10", "tradeoff", "depth"))
+
+def run(args) -> int:
+    """``mi-displace figures slicing``: the files of the module docstring under ``args.out``."""
+    results = write_figures(args.out, quick=args.quick, which=tuple(args.only or PARTS))
+    print(f"wrote {', '.join(f'slicing_{k}.json/.png' for k in results)} under {args.out}")
+    return 0
