@@ -101,5 +101,17 @@ def _resolve_in_package(app, env, node, contnode):
     return None
 
 
+def _copy_atlas(app, exception):
+    """The atlas (a generated HTML page with its images beside it, linked relatively) is
+    copied into the site as a folder, where its links keep working."""
+    import shutil
+    from pathlib import Path
+
+    if exception is None and app.builder.format == "html":
+        shutil.copytree(Path(app.srcdir) / "atlas", Path(app.outdir) / "atlas",
+                        dirs_exist_ok=True)
+
+
 def setup(app):
     app.connect("missing-reference", _resolve_in_package)
+    app.connect("build-finished", _copy_atlas)

@@ -16,7 +16,7 @@ PYTHON=${PYTHON:-python3}
 # assets then come from the installed package through Mitsuba's file resolver).
 SHOWCASE_SCENES=${SHOWCASE_SCENES:-"displaced_sphere.xml bump_vs_displaced.xml"}
 # Every bench, in its --quick mode (the peers they cannot find are reported unavailable)
-BENCHES=${BENCHES:-"bake bake_blender cluster core ddm dicing frames grad grad_bunny raster slicing vdm volume"}
+BENCHES=${BENCHES:-"bake bake_blender cluster core ddm denoise dicing frames grad grad_bunny raster slicing vdm volume"}
 
 if [ -n "${1:-}" ]; then mkdir -p "$1"; WORK=$(cd "$1" && pwd); else
   WORK=$(mktemp -d); trap 'rm -rf "$WORK"' EXIT; fi

@@ -18,6 +18,7 @@ FIELDS = {
     "bake_blender": ("spot_displaced",),
     "cluster": ("local_wall_s", "cluster_wall_s", "overhead_per_job_s", "mean_job_s_cluster"),
     "core": ("tessellate_4m_s", "accel_build_4m_s", "raster_512_1m_s", "path_1spp_512_1m_s"),
+    "denoise": ("rows",),
     "ddm": ("map_time_warm_s", "rms_error_rel", "max_error_rel", "maps_bytes", "table1"),
     "dicing": ("adaptive_faces", "uniform_faces", "flip_adaptive", "noise_floor_flip",
                "cycles_sphere_faces", "cycles_sphere_flip_vs_uniform_4x"),
