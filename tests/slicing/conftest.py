@@ -3,7 +3,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-MATERIAL = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.5, 0.4]}}
+from slicing_scenes import MATERIAL
 
 
 def look(origin, target, fov=40, res=48, ortho_size=None):
@@ -40,14 +40,6 @@ def plane(kind="slicing", height=None, scale=0.2, **kw):
     else:
         d.update({"draw_base": True, **kw})
     return d
-
-
-def bricks_torus(**kw):
-    """Common keywords of a bricks torus (``slicing`` or ``displaced``; add ``type``)."""
-    bricks = {"type": "bricks", "rows": 4, "columns": 2, "mortar": 0.15, "bevel": 0.2,
-              "to_uv": mi.ScalarTransform4f().scale([4, 2, 1])}
-    return {"base": "torus", "major_radius": 1.0, "minor_radius": 0.4, "scale": 0.1,
-            "height": bricks, "bsdf": MATERIAL, **kw}
 
 
 @pytest.fixture

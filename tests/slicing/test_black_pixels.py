@@ -11,7 +11,7 @@ gradient normal used as it is)."""
 import mitsuba as mi
 import numpy as np
 
-from conftest import bricks_torus
+from slicing_scenes import bricks_torus
 
 SPP = 32
 

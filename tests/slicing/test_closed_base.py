@@ -7,7 +7,7 @@ whose basic test draws zero heights; the same under `raster` and `path`)."""
 import mitsuba as mi
 import numpy as np
 
-from conftest import bricks_torus
+from slicing_scenes import bricks_torus
 
 
 def render(obj, integrator, spp):

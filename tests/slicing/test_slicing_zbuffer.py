@@ -9,7 +9,7 @@ for every direction; screen slicing 15 % when the walk searched the first stretc
 import mitsuba as mi
 import numpy as np
 
-from conftest import bricks_torus
+from slicing_scenes import bricks_torus
 
 
 def image(direction, visibility):
