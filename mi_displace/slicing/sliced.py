@@ -14,6 +14,7 @@ volume of the exact parametric base).
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import drjit as dr
@@ -67,10 +68,16 @@ class SlicedVolume:
         direction: one of :data:`DIRECTIONS`; alpha: one of ``basic`` / ``ramp``.
         ratio_scaling: §3.4 orthogonal slice counts; opaque_base: the base polygons are
             drawn too (opaque where every slice fails, e.g. under zero heights).
+        sensor: bounds the b / c counts by what it resolves
+            (:func:`mi_displace.slicing.geometry.sensor_counts`); None: unbounded.
+        max_memory_mb: the slice buffers' bound [MB]; the families' size is predicted
+            (:func:`mi_displace.slicing.geometry.family_bytes`) and a larger one refused
+            before anything is built.  None: unbounded.
     """
 
     def __init__(self, bm: geo.BaseMesh, height: mi.Texture, scale: float, slices: int,
-                 direction: str, alpha: str, ratio_scaling: bool = True, opaque_base: bool = False):
+                 direction: str, alpha: str, ratio_scaling: bool = True, opaque_base: bool = False,
+                 sensor: mi.Sensor | None = None, max_memory_mb: float | None = None):
         if direction not in DIRECTIONS:
             raise ValueError(f"slicing: 'direction' must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
         if alpha not in ALPHA_TESTS:
@@ -90,19 +97,32 @@ class SlicedVolume:
         walls = geo.volume_walls(bm, scale)
         self.walls = walls
         cb, cc = geo.orthogonal_counts(bm, scale, slices, ratio_scaling)
+        if sensor is not None and direction != "screen":
+            cb, cc = geo.sensor_counts(sensor, bm, scale, (cb, cc))
         self.counts = {"a": slices, "b": cb, "c": cc}
+        axes = {"a": None, "b": 0, "c": 1}
+        need = {f: geo.family_bytes(bm, axes[f], self.counts[f]) for f in FAMILIES[direction]}
+        if max_memory_mb is not None and sum(need.values()) > max_memory_mb * 1e6:
+            raise ValueError(
+                f"slicing: the slices would need {sum(need.values()) / 1e6:,.2f} MB ("
+                + ", ".join(f"{f}: {self.counts[f]} slices, {b / 1e6:,.2f} MB" for f, b in need.items())
+                + f"), more than max_memory_mb={max_memory_mb:g}; lower 'slices' or 'resolution', "
+                "reference the 'sensor' (bounds b / c by its pixels), or raise 'max_memory_mb'")
         self.families, tris, nbytes = {}, 0, walls.nbytes()
+        family_stats = {}
         for fam in FAMILIES[direction]:
-            if fam == "a":
+            start = time.perf_counter()
+            if axes[fam] is None:
                 sm = geo.aligned_slices(bm, scale, slices)
             else:
-                axis = 0 if fam == "b" else 1
-                sm = geo.orthogonal_slices(bm, scale, axis, geo.orthogonal_levels(bm, axis, self.counts[fam]))
+                sm = geo.orthogonal_slices(bm, scale, axes[fam], geo.orthogonal_levels(bm, axes[fam], self.counts[fam]))
             tris += sm.triangles
             nbytes += sm.nbytes()
             # the walk's polygon bound, opaque: the b / c counts follow the scale
             self.families[fam] = (geo.SliceScene(geo.concat([sm, walls]), f"slices_{fam}"),
                                   dr.opaque(mi.UInt32, 4 * self.counts[fam] + 64))
+            family_stats[fam] = {"slices": self.counts[fam], "triangles": int(sm.triangles),
+                                 "bytes": int(sm.nbytes()), "build_s": time.perf_counter() - start}
         self.walls_scene = geo.SliceScene(walls, "walls")   # also the proxy's face frames
         #: direction a for the rasteriser (mi_displace.slicing.rasterised): the base vertices'
         #: attributes, slice 0's triangles and the step between slices
@@ -130,6 +150,7 @@ class SlicedVolume:
                       "bytes": int(nbytes), "base_faces": int(len(bm.faces))}
         if direction != "screen":
             self.stats["slices_used"] = {f: self.counts[f] for f in FAMILIES[direction]}
+            self.stats["families"] = family_stats
 
     # -- the α channel -------------------------------------------------------------------
     def D(self, uv: mi.Point2f) -> mi.Float:
