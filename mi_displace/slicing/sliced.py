@@ -89,7 +89,11 @@ class SlicedVolume:
             raise ValueError(f"slicing: 'scale' must be a positive number, got {scale!r}")
         if direction == "screen" and bm.base is None:
             raise ValueError("slicing: direction 'screen' needs a parametric base (plane, sphere, "
-                             "cylinder, torus): the slices are clipped with its exact coordinates")
+                             "cylinder, torus): its planes are clipped by the (u, v, h) of every point "
+                             "they cross, closed-form there; on a mesh each point would need the "
+                             "prism holding it (no scene holds the prisms' inner sides, which twist "
+                             "where the corners' extrusion directions differ) and a cubic in h; "
+                             "use direction 'best' on a mesh")
         self.bm, self.height, self.scale, self.n = bm, height, float(scale), slices
         self.world_scale = bm.world_scale(scale)   # the maximum displacement in world units
         self.direction, self.alpha, self.opaque_base = direction, alpha, bool(opaque_base)

@@ -102,3 +102,12 @@ def test_image_unchanged_where_the_rule_keeps_everything(variant, tmp_path):
     img_a, img_b = (np.array(mi.render(s, spp=1)) for s in (scene_a, scene_b))
     assert np.all(np.isfinite(img_a)) and np.mean(img_a) > 0.05
     assert np.array_equal(img_a, img_b)
+
+
+def test_screen_on_a_mesh_is_refused_with_the_reason_before_building(variant, tmp_path, monkeypatch):
+    from mi_displace.slicing import geometry as geo
+
+    monkeypatch.setattr(geo, "volume_walls", lambda *a: pytest.fail("the volume was built"))
+    path = grid_obj(tmp_path / "grid.obj")
+    with pytest.raises((RuntimeError, ValueError), match=r"'screen' needs a parametric base.*prism.*'best'"):
+        load(path, 4, 0.1, direction="screen")
