@@ -98,8 +98,6 @@ class SlicedVolume:
         self.world_scale = bm.world_scale(scale)   # the maximum displacement in world units
         self.direction, self.alpha, self.opaque_base = direction, alpha, bool(opaque_base)
         self._grad = height_function(height, 1e-3)
-        walls = geo.volume_walls(bm, scale)
-        self.walls = walls
         cb, cc = geo.orthogonal_counts(bm, scale, slices, ratio_scaling)
         if sensor is not None and direction != "screen":
             cb, cc = geo.sensor_counts(sensor, bm, scale, (cb, cc))
@@ -112,6 +110,8 @@ class SlicedVolume:
                 + ", ".join(f"{f}: {self.counts[f]} slices, {b / 1e6:,.2f} MB" for f, b in need.items())
                 + f"), more than max_memory_mb={max_memory_mb:g}; lower 'slices' or 'resolution', "
                 "reference the 'sensor' (bounds b / c by its pixels), or raise 'max_memory_mb'")
+        walls = geo.volume_walls(bm, scale)
+        self.walls = walls
         self.families, tris, nbytes = {}, 0, walls.nbytes()
         family_stats = {}
         for fam in FAMILIES[direction]:

@@ -84,8 +84,8 @@ def test_max_memory_refuses_before_building(variant, tmp_path, monkeypatch):
     def never(*a, **k):
         raise AssertionError("a slice family was built")
 
-    monkeypatch.setattr(geo, "orthogonal_slices", never)
-    monkeypatch.setattr(geo, "aligned_slices", never)
+    for name in ("orthogonal_slices", "aligned_slices", "volume_walls"):
+        monkeypatch.setattr(geo, name, never)
     with pytest.raises((RuntimeError, ValueError), match=r"slicing: the slices would need .* MB .*max_memory_mb=") as err:
         load(path, 8, 0.1, max_memory_mb=need / 2)
     # the predicted size it names is the built one's (an upper bound within 1 %)
