@@ -5,10 +5,11 @@
   cup of :func:`mi_displace.slicing.assets.cup_mesh`) on a cube around it, written as
   ``DIR/cube.json`` + EXR/PNG files for ``<shape type="depth_object">``.
 * ``slicing-cup --out FILE.ply``: write the procedural cup mesh.
-* ``slicing-memory MESH [--slices N|auto] [--scale F] [--resolution R] [--max-memory-mb M]``:
-  load ``<shape type="slicing">`` with ``direction="best"`` on the OBJ/PLY mesh under a
+* ``slicing-memory MESH [--direction best|screen] [--slices N|auto] [--scale F]
+  [--resolution R] [--max-memory-mb M]``: load ``<shape type="slicing">`` on the OBJ/PLY mesh under a
   camera that frames it and print what the build reported (per family slices, triangles,
-  bytes, seconds) and how twisted its prisms are (:func:`memory_report`).
+  bytes, seconds; ``direction`` best by default) and how twisted its prisms are
+  (:func:`memory_report`).
 
 The measured figures of docs/slicing.md: ``mi-displace figures slicing``
 (:mod:`mi_displace.figures.slicing`).
@@ -53,15 +54,15 @@ def _cmd_cup(args) -> int:
 
 
 def memory_report(mesh: str, slices, scale_fraction: float, resolution: int,
-                  max_memory_mb: float = 512.0) -> dict:
-    """Load ``direction="best"`` slicing on ``mesh`` (OBJ / PLY path) under a 40° perspective
+                  max_memory_mb: float = 512.0, direction: str = "best") -> dict:
+    """Load ``direction`` slicing on ``mesh`` (OBJ / PLY path) under a 40° perspective
     camera of ``resolution``² pixels framing its bounding sphere from (0, 0.5, 1), with the
     maximum displacement ``scale_fraction`` x the bounding box diagonal and a bricks map.
 
     Returns:
         ``build_stats`` of the shape plus ``load_s`` (seconds of ``mi.load_dict``) and
-        ``prisms`` (:func:`mi_displace.slicing.geometry.prism_shape`: why ``screen`` needs a
-        parametric base).
+        ``prisms`` (:func:`mi_displace.slicing.geometry.prism_shape`: how far from straight
+        the mesh's prisms are, which screen-space slicing inverts by iteration).
     """
     import math
     import time
@@ -81,7 +82,7 @@ def memory_report(mesh: str, slices, scale_fraction: float, resolution: int,
                target=centre.tolist(), up=[0, 1, 0]),
            "film": {"type": "hdrfilm", "width": resolution, "height": resolution}}
     start = time.perf_counter()
-    shape = mi.load_dict({"type": "slicing", "base": "mesh", "filename": mesh, "direction": "best",
+    shape = mi.load_dict({"type": "slicing", "base": "mesh", "filename": mesh, "direction": direction,
                           "slices": slices, "scale": scale_fraction * 2 * radius,
                           "sensor": mi.load_dict(cam), "max_memory_mb": max_memory_mb,
                           "height": {"type": "bricks"}})
@@ -94,7 +95,8 @@ def _cmd_memory(args) -> int:
     import json
 
     slices = args.slices if args.slices == "auto" else int(args.slices)
-    report = memory_report(str(args.mesh), slices, args.scale, args.resolution, args.max_memory_mb)
+    report = memory_report(str(args.mesh), slices, args.scale, args.resolution, args.max_memory_mb,
+                           args.direction)
     print(json.dumps(report, indent=1, default=float))
     return 0
 
@@ -107,11 +109,12 @@ def add_commands(sub) -> dict:
     p.add_argument("--color", type=_color, default=[0.7, 0.7, 0.7], help="diffuse albedo R,G,B")
     p = sub.add_parser("slicing-cup", help="write the procedural cup mesh")
     p.add_argument("--out", type=Path, required=True, help="output .ply")
-    p = sub.add_parser("slicing-memory", help="slice families' size of best slicing on a mesh")
+    p = sub.add_parser("slicing-memory", help="size and build time of slicing on a mesh")
     p.add_argument("mesh", type=Path, help="OBJ/PLY mesh with texture coordinates")
     p.add_argument("--slices", default="auto", help="surface-aligned slices, or auto (default)")
     p.add_argument("--scale", type=float, default=0.005,
                    help="maximum displacement / bounding box diagonal (default 0.005)")
     p.add_argument("--resolution", type=int, default=1024, help="camera pixels per edge (default 1024)")
     p.add_argument("--max-memory-mb", type=float, default=512.0, help="the shape's max_memory_mb")
+    p.add_argument("--direction", choices=("best", "screen"), default="best", help="slice direction")
     return {"slicing-capture": _cmd_capture, "slicing-cup": _cmd_cup, "slicing-memory": _cmd_memory}

@@ -321,7 +321,7 @@ def orthogonal_slices(bm: BaseMesh, scale: float, axis: int, levels: np.ndarray)
 
 def prism_shape(bm: BaseMesh, scale: float) -> dict:
     """How far the base's prisms (each base triangle extruded to ``scale``) are from
-    straight ones, the reason screen-space slicing needs a parametric base: per triangle the
+    straight ones, which :class:`MeshCoordinates` inverts by iteration: per triangle the
     largest angle between its corners' extrusion directions [degrees] and the largest
     distance of a side quad's fourth corner from the plane of the other three [x the
     maximum displacement] (0 and 0 where a point's (u, v, h) is linear in the prism).
@@ -458,6 +458,44 @@ class SliceScene:
         return tuple(mi.Vector3f(*self.lerp(b, 3, idx, bary, active)) for b in (self.bn, self.su, self.sv))
 
 
+class MeshCoordinates:
+    """(u, v, h) of world points inside a mesh base's displacement volume, for the screen-
+    space slices (§3.3) where a parametric base has :func:`base_coordinates`.
+
+    A point p of the volume is q + h scale e(q): q on a base triangle, e the extrusion
+    interpolated there (:attr:`BaseMesh.extrude`).  Inverted by a fixed-point iteration:
+    from p along -e to the base (a ray query against the base triangles), e re-read at the
+    foot q, :data:`ITERATIONS` times; h is the distance to the foot over scale |e|.  Exact
+    in one step where e is the same over the prism (a flat base); elsewhere each step
+    takes the foot closer to the prism's (the spread of e over a triangle is
+    :func:`prism_shape`'s)."""
+
+    ITERATIONS = 3
+
+    def __init__(self, bm: BaseMesh, scale: float):
+        v = len(bm.positions)
+        sm = SliceMesh(bm.positions, bm.uvs, np.zeros((v, 3)), bm.extrude, bm.su, bm.sv, bm.faces)
+        self.base = SliceScene(sm, "screen_base")
+        self.nbytes = sm.nbytes()   # of the base triangles' buffers
+        self.scale = dr.opaque(mi.Float, scale)   # object units (e is world per unit scale)
+
+    def __call__(self, p: mi.Point3f, e: mi.Vector3f, active: mi.Bool):
+        """(uv, h, inside, (e, su, sv) at the foot) of world points ``p``, iterating from
+        the extrusion guess ``e`` (world, any length); ``inside``: a foot was found."""
+        base = self.base
+        for _ in range(self.ITERATIONS):
+            ray = mi.Ray3f(p, -dr.normalize(e))
+            pi = base.scene.ray_intersect_preliminary(ray, active)
+            ok = active & pi.is_valid()
+            bary = (pi.prim_uv.x, pi.prim_uv.y)
+            foot, su, sv = base.frame(pi.prim_index, bary, ok)
+            length = dr.norm(e)
+            e = dr.select(ok, foot, e)
+        uv = mi.Point2f(*base.lerp(base.uv, 2, base.corners(pi.prim_index, ok), bary, ok))
+        h = pi.t / (self.scale * dr.maximum(length, 1e-30))
+        return uv, h, ok, (e, su, sv)
+
+
 # ---------------------------------------------------------------------------------------
 # slice counts (§3.4)
 
@@ -535,7 +573,8 @@ def auto_slices(sensor: mi.Sensor, bbox, scale: float) -> int:
 
 
 # ---------------------------------------------------------------------------------------
-# exact (u, v, height) of a point over a parametric base (screen-space slices, §3.3)
+# exact (u, v, height) of a point over a parametric base (screen-space slices, §3.3; a
+# mesh base's: MeshCoordinates)
 
 def base_coordinates(base: surfaces.BaseSurface, p: mi.Point3f):
     """(u, v, signed distance along the normal, in_domain) of object-space points ``p``

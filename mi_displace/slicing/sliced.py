@@ -9,7 +9,8 @@ Directions: ``a`` (surface-aligned, §3.1), ``b`` / ``c`` (orthogonal along u / 
 ``best`` (per ray the one of a, b, c whose slices face the ray most, §3.2: "the slicing
 direction that is most perpendicular to the viewer"), ``screen`` (§3.3: planes
 perpendicular to the ray, ``p . d = k delta`` in object space, clipped to the displacement
-volume of the exact parametric base).
+volume: a parametric base's exact coordinates, a mesh base's by ray queries,
+:class:`mi_displace.slicing.geometry.MeshCoordinates`).
 """
 from __future__ import annotations
 
@@ -87,13 +88,6 @@ class SlicedVolume:
                              f"'auto', got {slices!r}")
         if not (math.isfinite(scale) and scale > 0):
             raise ValueError(f"slicing: 'scale' must be a positive number, got {scale!r}")
-        if direction == "screen" and bm.base is None:
-            raise ValueError("slicing: direction 'screen' needs a parametric base (plane, sphere, "
-                             "cylinder, torus): its planes are clipped by the (u, v, h) of every point "
-                             "they cross, closed-form there; on a mesh each point would need the "
-                             "prism holding it (no scene holds the prisms' inner sides, which twist "
-                             "where the corners' extrusion directions differ) and a cubic in h; "
-                             "use direction 'best' on a mesh")
         self.bm, self.height, self.scale, self.n = bm, height, float(scale), slices
         self.world_scale = bm.world_scale(scale)   # the maximum displacement in world units
         self.direction, self.alpha, self.opaque_base = direction, alpha, bool(opaque_base)
@@ -141,6 +135,9 @@ class SlicedVolume:
         self.to_world, self.to_object = geo.transform_pair(bm.to_world)
         if direction == "screen":
             self.delta = dr.opaque(mi.Float, self.scale / slices)   # object units
+            #: a mesh base's (u, v, h) of a point (a parametric one's are closed-form)
+            self.mesh_coords = geo.MeshCoordinates(bm, self.scale) if bm.base is None else None
+            nbytes += self.mesh_coords.nbytes if self.mesh_coords is not None else 0
         #: the sizes the kernels read, opaque (kernel parameters, not traced constants): a
         #: rebuild at a new ``scale`` reuses the compiled kernels.  ``scale`` [object units];
         #: the self-shadow rays' offsets along the normal and the light [world units]
@@ -234,22 +231,28 @@ class SlicedVolume:
         return drawn.select(use, Hit(*walked))
 
     def _find_screen(self, origin, d, active, t_floor=None):
-        """§3.3: planes perpendicular to the ray, p . d = k delta, clipped to the volume (the
-        base's exact coordinates).  Made in object space (p, d, delta = scale / N there), so
+        """§3.3: planes perpendicular to the ray, p . d = k delta, clipped to the volume (a
+        parametric base's exact coordinates; a mesh base's by :attr:`mesh_coords`, from the
+        extrusion where the ray enters the volume).  Made in object space (p, d, delta = scale / N there), so
         that ``to_world`` moves them with the surface; the ray parameter t is shared."""
         never = lambda uv, h: dr.zeros(mi.Bool, dr.width(h))
         *_, t_in, t_out, bottom = first_passing_slice(self.walls_scene, origin, d, never, active, 64,
                                                       t_floor=t_floor)
         t_out = dr.select(dr.isinf(t_out), t_in, t_out)
-        base = self.bm.base
+        base, mesh = self.bm.base, self.mesh_coords
         o_obj, d_obj = self.to_object @ mi.Point3f(origin), self.to_object @ mi.Vector3f(d)
+        if mesh is not None:   # the fixed point's first guess: the extrusion where the ray enters
+            pi = self.walls_scene.scene.ray_intersect_preliminary(mi.Ray3f(origin, d), active)
+            guess = self.walls_scene.frame(pi.prim_index, (pi.prim_uv.x, pi.prim_uv.y), active)[0]
 
-        def coords(p):   # p: object space
+        def coords(p):   # p: object space; the frame (n, su, sv) [world] on a mesh
+            if mesh is not None:
+                return mesh(self.to_world @ p, guess, active)
             u, v, dist, inside = geo.base_coordinates(base, p)
-            return mi.Point2f(u, v), dist / self.kernel_scale, inside
+            return mi.Point2f(u, v), dist / self.kernel_scale, inside, None
 
         def test(p):
-            uv, h, inside = coords(p)
+            uv, h, inside, _ = coords(p)
             return inside & (h >= 0) & (h <= 1) & alpha_test(self.alpha, self.D(uv), h)
 
         steps = int(2 * self.n * 200) + 64   # grazing rays: path length / delta
@@ -258,7 +261,10 @@ class SlicedVolume:
         if self.opaque_base:
             t = dr.select(found, t, t_out)
             found |= active & bottom
-        uv, _, _ = coords(o_obj + t * d_obj)
+        uv, _, _, frame = coords(o_obj + t * d_obj)
+        if frame is not None:
+            n, su, sv = frame
+            return Hit(found, mi.Point3f(origin + t * d), uv, dr.normalize(n), su, sv)
         s = base.sample(uv.x, uv.y)
         n = dr.normalize(self.to_world @ mi.Normal3f(s.n))
         return Hit(found, mi.Point3f(origin + t * d), uv, mi.Vector3f(n),
