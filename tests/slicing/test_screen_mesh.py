@@ -57,3 +57,19 @@ def test_screen_on_a_sphere_mesh_matches_the_parametric_sphere(variant, tmp_path
     assert differ(screen, exact) < differ(best, exact)
     monkeypatch.setattr(geo.MeshCoordinates, "ITERATIONS", 1)
     assert differ(render(cam, {**mesh, "direction": "screen"}), exact) > differ(screen, exact)
+
+
+def test_screen_on_a_mesh_follows_to_world(variant, tmp_path):
+    """The planes are made in object space and the mesh's coordinates found in world
+    space: under a rotated, translated and non-uniformly scaled ``to_world`` the flat mesh
+    still gives the parametric plane's image."""
+    path = grid_obj(tmp_path / "grid.obj")
+    T = mi.ScalarTransform4f
+    to_world = T().translate([0.3, 0.2, 0]) @ T().rotate([0, 0, 1], 25) @ T().scale([1.3, 0.8, 1.0])
+    common = {"direction": "screen", "slices": 8, "scale": 0.2, "draw_base": True, "to_world": to_world,
+              "height": {"type": "bricks", "rows": 4, "columns": 2}}
+    cam = sensor()
+    cam["to_world"] = T().look_at(origin=[1.0, -3.2, 3.0], target=[0.3, 0.2, 0], up=[0, 0, 1])
+    mesh, plane = (render(cam, {"type": "slicing", **base, **common})
+                   for base in ({"base": "mesh", "filename": path}, {"base": "plane"}))
+    assert differ(mesh, plane) < 0.01
