@@ -78,9 +78,8 @@ SPEC = PluginSpec(
     stats="the slice counts per direction (what auto chose: slices_auto), triangles, bytes, "
           "build_s, and per family (families: slices, triangles, bytes, build_s)",
     limits="Self-shadows and colour come from the slices, so they band at few slices; "
-           "`direction=screen` on a mesh base costs three ray queries per plane point tested "
-           "(its (u, v, h) found by iteration) and speckles where a triangle's normals "
-           "spread widely.",
+           "`direction=screen` on a mesh base costs four ray queries per plane point tested "
+           "(its (u, v, h) found by iteration).",
 )
 
 

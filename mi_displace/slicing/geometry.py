@@ -470,7 +470,7 @@ class MeshCoordinates:
     takes the foot closer to the prism's (the spread of e over a triangle is
     :func:`prism_shape`'s)."""
 
-    ITERATIONS = 3
+    ITERATIONS = 4
 
     def __init__(self, bm: BaseMesh, scale: float):
         v = len(bm.positions)

@@ -40,7 +40,7 @@ def test_screen_on_a_flat_mesh_matches_the_parametric_plane(variant, tmp_path):
 def test_screen_on_a_sphere_mesh_matches_the_parametric_sphere(variant, tmp_path, monkeypatch):
     """A 64 x 32 lat-long sphere mesh (the parametric sphere's uv): its extrusion directions
     spread by ~6 degrees over a triangle, so the foot is found by iterating; the image is
-    the parametric sphere's up to the facets (measured: 2.0 % of 48^2 pixels differ, 2.9 %
+    the parametric sphere's up to the facets (measured: 0.65 % of 48^2 pixels differ, 2.9 %
     for `best` on the same mesh, 3.9 % with a single step from the entry's extrusion)."""
     from mi_displace.slicing import geometry as geo
 
@@ -53,7 +53,7 @@ def test_screen_on_a_sphere_mesh_matches_the_parametric_sphere(variant, tmp_path
     mesh = {"type": "slicing", "base": "mesh", "filename": path, **common}
     screen = render(cam, {**mesh, "direction": "screen"})
     best = render(cam, {**mesh, "direction": "best"})
-    assert differ(screen, exact) < 0.025
+    assert differ(screen, exact) < 0.015
     assert differ(screen, exact) < differ(best, exact)
     monkeypatch.setattr(geo.MeshCoordinates, "ITERATIONS", 1)
     assert differ(render(cam, {**mesh, "direction": "screen"}), exact) > differ(screen, exact)
