@@ -49,8 +49,12 @@ SPEC = PluginSpec(
               low=0, open_low=True, editable=True),
         Param("slices", "int", 25, "slices along the main direction (auto: from the sensor)",
               low=1, high=geo.MAX_SLICES, auto=True, editable=True),
-        Param("sensor", "sensor", None, "the camera `slices=auto` sizes for (`<ref name=\"sensor\" "
-              "id=\"...\"/>`, declared before this shape)"),
+        Param("sensor", "sensor", None, "the camera `slices=auto` sizes for and that bounds the "
+              "b / c slice counts (at most 2 per pixel of the base's length along u / v there) "
+              "(`<ref name=\"sensor\" id=\"...\"/>`, declared before this shape)"),
+        Param("max_memory_mb", "float", 512, "bound on the slice buffers (predicted per family "
+              "before building; more is refused with the numbers)", unit="MB", low=0,
+              open_low=True),
         Param("direction", "string", "best", "slice direction (a: parallel to the base, b/c: "
               "orthogonal; best: per view; screen: view-aligned)", choices=DIRECTIONS),
         Param("alpha", "string", None, "α-test (default: basic for direction a, else ramp)",
@@ -71,9 +75,11 @@ SPEC = PluginSpec(
 </shape>""",
     nested="the `height` texture; at most one `bsdf` (the material, its textures read at the "
            "slice uv; `diffuse` when none)",
-    stats="the slice counts per direction (what auto chose: slices_auto), triangles, bytes, build_s",
+    stats="the slice counts per direction (what auto chose: slices_auto), triangles, bytes, "
+          "build_s, and per family (families: slices, triangles, bytes, build_s)",
     limits="Self-shadows and colour come from the slices, so they band at few slices; "
-           "`direction=screen` needs a parametric base.",
+           "`direction=screen` on a mesh base costs four ray queries per plane point tested "
+           "(its (u, v, h) found by iteration).",
 )
 
 
@@ -104,7 +110,8 @@ class Slicing(mi.Mesh):
         auto = slices == "auto"
         if auto:
             slices = geo.auto_slices(sensor, bm.bbox(scale), bm.world_scale(scale))
-        volume = SlicedVolume(bm, height, scale, slices, direction, alpha, ratio_scaling, draw_base)
+        self._settings = (direction, alpha, ratio_scaling, draw_base, sensor, values["max_memory_mb"])
+        volume = SlicedVolume(bm, height, scale, slices, *self._settings)
 
         bsdfs = nested_objects(props, mi.BSDF)
         if len(bsdfs) > 1:
@@ -122,7 +129,6 @@ class Slicing(mi.Mesh):
         self.scale, self.slices = mi.Float(scale), mi.Float(slices)
         geo.fill_mesh(self, walls)
         self.volume, self.bsdf_ref = volume, bsdf
-        self._settings = (direction, alpha, ratio_scaling, draw_base)
         self._rays = None   # the thickness check's rays (mesh bases), cast once
         self.build_stats = {**volume.stats, "slices_auto": auto, **self._thickness(),
                             "build_s": time.perf_counter() - start}

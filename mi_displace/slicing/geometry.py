@@ -164,6 +164,10 @@ def transform_pair(matrix: np.ndarray) -> tuple[mi.Transform4f, mi.Transform4f]:
     return make(m), make(np.linalg.inv(m))
 
 
+#: Bytes per vertex and per triangle of a :class:`SliceMesh` (:meth:`SliceMesh.nbytes`).
+VERTEX_BYTES, TRIANGLE_BYTES = (3 + 2 + 4 * 3) * 4, 12
+
+
 @dataclass
 class SliceMesh:
     """Triangles with the slice attributes (module docstring); all (V, k) float64."""
@@ -182,7 +186,7 @@ class SliceMesh:
 
     def nbytes(self) -> int:
         """Bytes of the float32 vertex buffers and uint32 indices."""
-        return len(self.positions) * (3 + 2 + 4 * 3) * 4 + len(self.faces) * 12
+        return len(self.positions) * VERTEX_BYTES + len(self.faces) * TRIANGLE_BYTES
 
 
 def _vertex_data(bm: BaseMesh, h: float, ramp: float, wall: float, bottom: float = 0.0):
@@ -252,14 +256,31 @@ def orthogonal_levels(bm: BaseMesh, axis: int, count: int) -> np.ndarray:
     return lo + (np.arange(count) + 0.5) * (hi - lo) / count
 
 
+def _crossings(bm: BaseMesh, axis: int, levels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per base triangle, the first of ``levels`` its ``axis`` range reaches and how many
+    it spans, (F,) int each (an upper bound on its iso-line segments)."""
+    val = bm.uvs[bm.faces][:, :, axis]                    # (F, 3)
+    lo = np.searchsorted(levels, val.min(1), "left")
+    hi = np.searchsorted(levels, val.max(1), "right")
+    return lo, np.maximum(hi - lo, 0)
+
+
+def family_bytes(bm: BaseMesh, axis: int | None, count: int) -> int:
+    """Bytes of one slice family before it is built (an upper bound on the built
+    :meth:`SliceMesh.nbytes`): ``axis`` None is direction a with ``count`` slices (each a
+    copy of the base's V vertices and F faces); 0 / 1 are b / c at ``count`` levels (per
+    iso-line segment a quad: 4 vertices, 2 triangles)."""
+    if axis is None:
+        return count * (len(bm.positions) * VERTEX_BYTES + len(bm.faces) * TRIANGLE_BYTES)
+    segments = int(_crossings(bm, axis, orthogonal_levels(bm, axis, count))[1].sum())
+    return segments * (4 * VERTEX_BYTES + 2 * TRIANGLE_BYTES)
+
+
 def orthogonal_slices(bm: BaseMesh, scale: float, axis: int, levels: np.ndarray) -> SliceMesh:
     """Directions b (axis 0, iso-u) / c (axis 1, iso-v), §3.2: per base triangle, the
     segment of each iso-line through it extruded along the normals to h = 1 (a quad with
     h_α = 0 at the bottom, 1 at the top)."""
-    val = bm.uvs[bm.faces][:, :, axis]                    # (F, 3)
-    lo = np.searchsorted(levels, val.min(1), "left")
-    hi = np.searchsorted(levels, val.max(1), "right")
-    count = np.maximum(hi - lo, 0)
+    lo, count = _crossings(bm, axis, levels)
     _check_size(2 * int(count.sum()), f"{len(levels)} orthogonal slices")
     face = np.repeat(np.arange(len(bm.faces)), count)
     level = levels[np.repeat(lo, count) + np.arange(int(count.sum())) - np.repeat(
@@ -296,6 +317,29 @@ def orthogonal_slices(bm: BaseMesh, scale: float, axis: int, levels: np.ndarray)
     return SliceMesh(pos.reshape(-1, 3), uv[:, pick].reshape(-1, 2), rw.reshape(-1, 3),
                      n[:, pick].reshape(-1, 3), su[:, pick].reshape(-1, 3),
                      sv[:, pick].reshape(-1, 3), faces)
+
+
+def prism_shape(bm: BaseMesh, scale: float) -> dict:
+    """How far the base's prisms (each base triangle extruded to ``scale``) are from
+    straight ones, which :class:`MeshCoordinates` inverts by iteration: per triangle the
+    largest angle between its corners' extrusion directions [degrees] and the largest
+    distance of a side quad's fourth corner from the plane of the other three [x the
+    maximum displacement] (0 and 0 where a point's (u, v, h) is linear in the prism).
+
+    Returns:
+        ``{"spread_deg": (median, 95 %, max), "twist": (median, 95 %, max),
+        "spread_over_1deg": fraction of triangles}``.
+    """
+    e = bm.extrude / np.maximum(np.linalg.norm(bm.extrude, axis=1, keepdims=True), 1e-30)
+    f, g = bm.faces, np.roll(bm.faces, -1, 1)                 # corner i and i + 1, (F, 3)
+    spread = np.degrees(np.arccos(np.clip((e[f] * e[g]).sum(2), -1, 1))).max(1)
+    world = bm.world_scale(scale)
+    a, b = bm.positions[f], bm.positions[g]
+    n = np.cross(b - a, b + world * e[g] - a)
+    n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-30)
+    twist = np.abs((world * e[f] * n).sum(2)).max(1) / world
+    pct = lambda x: tuple(float(v) for v in np.percentile(x, [50, 95, 100]))
+    return {"spread_deg": pct(spread), "twist": pct(twist), "spread_over_1deg": float((spread > 1).mean())}
 
 
 def boundary_edges(bm: BaseMesh) -> np.ndarray:
@@ -414,6 +458,44 @@ class SliceScene:
         return tuple(mi.Vector3f(*self.lerp(b, 3, idx, bary, active)) for b in (self.bn, self.su, self.sv))
 
 
+class MeshCoordinates:
+    """(u, v, h) of world points inside a mesh base's displacement volume, for the screen-
+    space slices (§3.3) where a parametric base has :func:`base_coordinates`.
+
+    A point p of the volume is q + h scale e(q): q on a base triangle, e the extrusion
+    interpolated there (:attr:`BaseMesh.extrude`).  Inverted by a fixed-point iteration:
+    from p along -e to the base (a ray query against the base triangles), e re-read at the
+    foot q, :data:`ITERATIONS` times; h is the distance to the foot over scale |e|.  Exact
+    in one step where e is the same over the prism (a flat base); elsewhere each step
+    takes the foot closer to the prism's (the spread of e over a triangle is
+    :func:`prism_shape`'s)."""
+
+    ITERATIONS = 4
+
+    def __init__(self, bm: BaseMesh, scale: float):
+        v = len(bm.positions)
+        sm = SliceMesh(bm.positions, bm.uvs, np.zeros((v, 3)), bm.extrude, bm.su, bm.sv, bm.faces)
+        self.base = SliceScene(sm, "screen_base")
+        self.nbytes = sm.nbytes()   # of the base triangles' buffers
+        self.scale = dr.opaque(mi.Float, scale)   # object units (e is world per unit scale)
+
+    def __call__(self, p: mi.Point3f, e: mi.Vector3f, active: mi.Bool):
+        """(uv, h, inside, (e, su, sv) at the foot) of world points ``p``, iterating from
+        the extrusion guess ``e`` (world, any length); ``inside``: a foot was found."""
+        base = self.base
+        for _ in range(self.ITERATIONS):
+            ray = mi.Ray3f(p, -dr.normalize(e))
+            pi = base.scene.ray_intersect_preliminary(ray, active)
+            ok = active & pi.is_valid()
+            bary = (pi.prim_uv.x, pi.prim_uv.y)
+            foot, su, sv = base.frame(pi.prim_index, bary, ok)
+            length = dr.norm(e)
+            e = dr.select(ok, foot, e)
+        uv = mi.Point2f(*base.lerp(base.uv, 2, base.corners(pi.prim_index, ok), bary, ok))
+        h = pi.t / (self.scale * dr.maximum(length, 1e-30))
+        return uv, h, ok, (e, su, sv)
+
+
 # ---------------------------------------------------------------------------------------
 # slice counts (§3.4)
 
@@ -466,6 +548,16 @@ def projected_size(sensor: mi.Sensor, bbox: tuple[np.ndarray, np.ndarray], lengt
 SLICES_PER_PIXEL = 2
 
 
+def sensor_counts(sensor: mi.Sensor, bm: BaseMesh, scale: float, counts: tuple[int, int]) -> tuple[int, int]:
+    """The orthogonal slice counts ``counts`` (b, c) bounded by what ``sensor`` resolves:
+    at most :data:`SLICES_PER_PIXEL` slices per pixel of the base's world length along u /
+    v (:meth:`BaseMesh.extent`) projected at the volume's point nearest to the camera
+    (:func:`projected_size`), the spacing rule of :func:`auto_slices` applied to b and c."""
+    bbox = bm.bbox(scale)
+    return tuple(min(c, max(1, math.ceil(SLICES_PER_PIXEL * projected_size(sensor, bbox, length) - 1e-6)))
+                 for c, length in zip(counts, bm.extent()))
+
+
 def auto_slices(sensor: mi.Sensor, bbox, scale: float) -> int:
     """§3.4 'auto': :data:`SLICES_PER_PIXEL` surface-aligned slices per pixel of the
     maximum displacement's projected size on the scene's sensor, in [1, MAX_SLICES].
@@ -481,7 +573,8 @@ def auto_slices(sensor: mi.Sensor, bbox, scale: float) -> int:
 
 
 # ---------------------------------------------------------------------------------------
-# exact (u, v, height) of a point over a parametric base (screen-space slices, §3.3)
+# exact (u, v, height) of a point over a parametric base (screen-space slices, §3.3; a
+# mesh base's: MeshCoordinates)
 
 def base_coordinates(base: surfaces.BaseSurface, p: mi.Point3f):
     """(u, v, signed distance along the normal, in_domain) of object-space points ``p``

@@ -9,11 +9,13 @@ Directions: ``a`` (surface-aligned, §3.1), ``b`` / ``c`` (orthogonal along u / 
 ``best`` (per ray the one of a, b, c whose slices face the ray most, §3.2: "the slicing
 direction that is most perpendicular to the viewer"), ``screen`` (§3.3: planes
 perpendicular to the ray, ``p . d = k delta`` in object space, clipped to the displacement
-volume of the exact parametric base).
+volume: a parametric base's exact coordinates, a mesh base's by ray queries,
+:class:`mi_displace.slicing.geometry.MeshCoordinates`).
 """
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import drjit as dr
@@ -67,10 +69,16 @@ class SlicedVolume:
         direction: one of :data:`DIRECTIONS`; alpha: one of ``basic`` / ``ramp``.
         ratio_scaling: §3.4 orthogonal slice counts; opaque_base: the base polygons are
             drawn too (opaque where every slice fails, e.g. under zero heights).
+        sensor: bounds the b / c counts by what it resolves
+            (:func:`mi_displace.slicing.geometry.sensor_counts`); None: unbounded.
+        max_memory_mb: the slice buffers' bound [MB]; the families' size is predicted
+            (:func:`mi_displace.slicing.geometry.family_bytes`) and a larger one refused
+            before anything is built.  None: unbounded.
     """
 
     def __init__(self, bm: geo.BaseMesh, height: mi.Texture, scale: float, slices: int,
-                 direction: str, alpha: str, ratio_scaling: bool = True, opaque_base: bool = False):
+                 direction: str, alpha: str, ratio_scaling: bool = True, opaque_base: bool = False,
+                 sensor: mi.Sensor | None = None, max_memory_mb: float | None = None):
         if direction not in DIRECTIONS:
             raise ValueError(f"slicing: 'direction' must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
         if alpha not in ALPHA_TESTS:
@@ -80,29 +88,39 @@ class SlicedVolume:
                              f"'auto', got {slices!r}")
         if not (math.isfinite(scale) and scale > 0):
             raise ValueError(f"slicing: 'scale' must be a positive number, got {scale!r}")
-        if direction == "screen" and bm.base is None:
-            raise ValueError("slicing: direction 'screen' needs a parametric base (plane, sphere, "
-                             "cylinder, torus): the slices are clipped with its exact coordinates")
         self.bm, self.height, self.scale, self.n = bm, height, float(scale), slices
         self.world_scale = bm.world_scale(scale)   # the maximum displacement in world units
         self.direction, self.alpha, self.opaque_base = direction, alpha, bool(opaque_base)
         self._grad = height_function(height, 1e-3)
+        cb, cc = geo.orthogonal_counts(bm, scale, slices, ratio_scaling)
+        if sensor is not None and direction != "screen":
+            cb, cc = geo.sensor_counts(sensor, bm, scale, (cb, cc))
+        self.counts = {"a": slices, "b": cb, "c": cc}
+        axes = {"a": None, "b": 0, "c": 1}
+        need = {f: geo.family_bytes(bm, axes[f], self.counts[f]) for f in FAMILIES[direction]}
+        if max_memory_mb is not None and sum(need.values()) > max_memory_mb * 1e6:
+            raise ValueError(
+                f"slicing: the slices would need {sum(need.values()) / 1e6:,.2f} MB ("
+                + ", ".join(f"{f}: {self.counts[f]} slices, {b / 1e6:,.2f} MB" for f, b in need.items())
+                + f"), more than max_memory_mb={max_memory_mb:g}; lower 'slices' or 'resolution', "
+                "reference the 'sensor' (bounds b / c by its pixels), or raise 'max_memory_mb'")
         walls = geo.volume_walls(bm, scale)
         self.walls = walls
-        cb, cc = geo.orthogonal_counts(bm, scale, slices, ratio_scaling)
-        self.counts = {"a": slices, "b": cb, "c": cc}
         self.families, tris, nbytes = {}, 0, walls.nbytes()
+        family_stats = {}
         for fam in FAMILIES[direction]:
-            if fam == "a":
+            start = time.perf_counter()
+            if axes[fam] is None:
                 sm = geo.aligned_slices(bm, scale, slices)
             else:
-                axis = 0 if fam == "b" else 1
-                sm = geo.orthogonal_slices(bm, scale, axis, geo.orthogonal_levels(bm, axis, self.counts[fam]))
+                sm = geo.orthogonal_slices(bm, scale, axes[fam], geo.orthogonal_levels(bm, axes[fam], self.counts[fam]))
             tris += sm.triangles
             nbytes += sm.nbytes()
             # the walk's polygon bound, opaque: the b / c counts follow the scale
             self.families[fam] = (geo.SliceScene(geo.concat([sm, walls]), f"slices_{fam}"),
                                   dr.opaque(mi.UInt32, 4 * self.counts[fam] + 64))
+            family_stats[fam] = {"slices": self.counts[fam], "triangles": int(sm.triangles),
+                                 "bytes": int(sm.nbytes()), "build_s": time.perf_counter() - start}
         self.walls_scene = geo.SliceScene(walls, "walls")   # also the proxy's face frames
         #: direction a for the rasteriser (mi_displace.slicing.rasterised): the base vertices'
         #: attributes, slice 0's triangles and the step between slices
@@ -117,6 +135,9 @@ class SlicedVolume:
         self.to_world, self.to_object = geo.transform_pair(bm.to_world)
         if direction == "screen":
             self.delta = dr.opaque(mi.Float, self.scale / slices)   # object units
+            #: a mesh base's (u, v, h) of a point (a parametric one's are closed-form)
+            self.mesh_coords = geo.MeshCoordinates(bm, self.scale) if bm.base is None else None
+            nbytes += self.mesh_coords.nbytes if self.mesh_coords is not None else 0
         #: the sizes the kernels read, opaque (kernel parameters, not traced constants): a
         #: rebuild at a new ``scale`` reuses the compiled kernels.  ``scale`` [object units];
         #: the self-shadow rays' offsets along the normal and the light [world units]
@@ -130,6 +151,7 @@ class SlicedVolume:
                       "bytes": int(nbytes), "base_faces": int(len(bm.faces))}
         if direction != "screen":
             self.stats["slices_used"] = {f: self.counts[f] for f in FAMILIES[direction]}
+            self.stats["families"] = family_stats
 
     # -- the α channel -------------------------------------------------------------------
     def D(self, uv: mi.Point2f) -> mi.Float:
@@ -209,22 +231,28 @@ class SlicedVolume:
         return drawn.select(use, Hit(*walked))
 
     def _find_screen(self, origin, d, active, t_floor=None):
-        """§3.3: planes perpendicular to the ray, p . d = k delta, clipped to the volume (the
-        base's exact coordinates).  Made in object space (p, d, delta = scale / N there), so
+        """§3.3: planes perpendicular to the ray, p . d = k delta, clipped to the volume (a
+        parametric base's exact coordinates; a mesh base's by :attr:`mesh_coords`, from the
+        extrusion where the ray enters the volume).  Made in object space (p, d, delta = scale / N there), so
         that ``to_world`` moves them with the surface; the ray parameter t is shared."""
         never = lambda uv, h: dr.zeros(mi.Bool, dr.width(h))
         *_, t_in, t_out, bottom = first_passing_slice(self.walls_scene, origin, d, never, active, 64,
                                                       t_floor=t_floor)
         t_out = dr.select(dr.isinf(t_out), t_in, t_out)
-        base = self.bm.base
+        base, mesh = self.bm.base, self.mesh_coords
         o_obj, d_obj = self.to_object @ mi.Point3f(origin), self.to_object @ mi.Vector3f(d)
+        if mesh is not None:   # the fixed point's first guess: the extrusion where the ray enters
+            pi = self.walls_scene.scene.ray_intersect_preliminary(mi.Ray3f(origin, d), active)
+            guess = self.walls_scene.frame(pi.prim_index, (pi.prim_uv.x, pi.prim_uv.y), active)[0]
 
-        def coords(p):   # p: object space
+        def coords(p):   # p: object space; the frame (n, su, sv) [world] on a mesh
+            if mesh is not None:
+                return mesh(self.to_world @ mi.Point3f(p), guess, active)
             u, v, dist, inside = geo.base_coordinates(base, p)
-            return mi.Point2f(u, v), dist / self.kernel_scale, inside
+            return mi.Point2f(u, v), dist / self.kernel_scale, inside, None
 
         def test(p):
-            uv, h, inside = coords(p)
+            uv, h, inside, _ = coords(p)
             return inside & (h >= 0) & (h <= 1) & alpha_test(self.alpha, self.D(uv), h)
 
         steps = int(2 * self.n * 200) + 64   # grazing rays: path length / delta
@@ -233,7 +261,10 @@ class SlicedVolume:
         if self.opaque_base:
             t = dr.select(found, t, t_out)
             found |= active & bottom
-        uv, _, _ = coords(o_obj + t * d_obj)
+        uv, _, _, frame = coords(o_obj + t * d_obj)
+        if frame is not None:
+            n, su, sv = frame
+            return Hit(found, mi.Point3f(origin + t * d), uv, dr.normalize(n), su, sv)
         s = base.sample(uv.x, uv.y)
         n = dr.normalize(self.to_world @ mi.Normal3f(s.n))
         return Hit(found, mi.Point3f(origin + t * d), uv, mi.Vector3f(n),

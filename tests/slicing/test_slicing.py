@@ -261,14 +261,6 @@ def test_bad_input(variant, bad, message):
         mi.load_dict(d)
 
 
-def test_screen_needs_a_parametric_base(variant, tmp_path):
-    obj = tmp_path / "tri.obj"
-    obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n")
-    with pytest.raises(Exception, match="screen"):
-        mi.load_dict({"type": "slicing", "base": "mesh", "filename": str(obj), "scale": 0.1,
-                      "direction": "screen", "height": {"type": "uniform", "value": 0.5}})
-
-
 def test_colour_texture_is_extruded_with_the_slices(variant, helpers):
     """The nested material's textures are read at the slice fragment's uv (the RGB of the
     paper's RGBα displacement texture): a checkerboard matches true displacement."""
