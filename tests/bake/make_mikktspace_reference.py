@@ -7,10 +7,10 @@ import mikktspace as C
 sys.path.insert(0, "tests/bake")
 import mitsuba as mi
 mi.set_variant("llvm_ad_rgb")
-import conftest
+import bake_meshes
 from mi_displace.bake.meshdata import vertex_normals
 
-sp = conftest._sphere_mesh(32, 16, 0.05)
+sp = bake_meshes._sphere_mesh(32, 16, 0.05)
 p, f, uv = sp.positions, sp.faces, sp.uvs.copy()
 rng = np.random.default_rng(7)
 uv[p[:, 0] > 0.2, 0] = 1.0 - uv[p[:, 0] > 0.2, 0]          # mirrored region: fans with both orientations

@@ -1,7 +1,7 @@
 """The cage option (Fig. 8) and multistep displacement (§4, Fig. 9)."""
 import numpy as np
 import pytest
-from conftest import plane
+from bake_meshes import plane
 from test_bake_extremes import _stack
 
 from mi_displace.bake.baker import bake

@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import AMPLITUDE
+from bake_meshes import AMPLITUDE
 
 from mi_displace.bake.baker import DISTANCE_FLOOR_REL, DISTANCE_MARGIN
 from mi_displace.bake.formats import FORMATS

@@ -1,7 +1,7 @@
 """Extremes and bad input of the baker (issue list), each with numbers asserted."""
 import numpy as np
 import pytest
-from conftest import plane
+from bake_meshes import plane
 
 from mi_displace.bake import baker
 from mi_displace.bake.baker import bake

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import mi_displace
-from conftest import plane
+from bake_meshes import plane
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.levels import auto_levels, pixel_footprint

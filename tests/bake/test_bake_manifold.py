@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import plane
+from bake_meshes import plane
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.meshdata import MeshData, edge_counts, face_defects, load_mesh, weld_ids

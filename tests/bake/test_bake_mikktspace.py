@@ -3,7 +3,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import _sphere_mesh, plane, tilted_plane
+from bake_meshes import _sphere_mesh, plane, tilted_plane
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.meshdata import MeshData, vertex_normals

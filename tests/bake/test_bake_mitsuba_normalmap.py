@@ -4,7 +4,7 @@ BSDF on the MikkTSpace map does not (issue 29's seams)."""
 import mitsuba as mi
 import numpy as np
 import pytest
-from conftest import _sphere_mesh
+from bake_meshes import _sphere_mesh
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.meshdata import MeshData

@@ -1,7 +1,7 @@
 """Edge padding against brute force; the tangent frame and tangent-space normals."""
 import numpy as np
 import pytest
-from conftest import plane
+from bake_meshes import plane
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.meshdata import MeshData

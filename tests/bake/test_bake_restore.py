@@ -3,7 +3,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import AMPLITUDE, plane, sphere_height
+from bake_meshes import AMPLITUDE, plane, sphere_height
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.meshdata import weld_ids

@@ -3,7 +3,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
-from conftest import plane
+from bake_meshes import plane
 
 from mi_displace.bake.baker import bake
 

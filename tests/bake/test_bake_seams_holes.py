@@ -1,6 +1,6 @@
 """A textured high-poly's own UV seams, restoration of closed low-polys, the low.obj layout."""
 import numpy as np
-from conftest import AMPLITUDE, _sphere_mesh
+from bake_meshes import AMPLITUDE, _sphere_mesh
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.meshdata import MeshData, load_mesh, save_obj, weld_ids

@@ -1,6 +1,6 @@
 """Analytic check: a sphere displaced by a known function, baked onto the plain sphere."""
 import numpy as np
-from conftest import AMPLITUDE, _sphere_mesh, sphere_height
+from bake_meshes import AMPLITUDE, _sphere_mesh, sphere_height
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.formats import read_map

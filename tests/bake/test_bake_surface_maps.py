@@ -4,7 +4,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from conftest import _sphere_mesh, plane
+from bake_meshes import _sphere_mesh, plane
 
 
 def _union(*meshes):

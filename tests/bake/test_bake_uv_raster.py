@@ -4,7 +4,7 @@ import re
 
 import numpy as np
 import pytest
-from conftest import plane, tilted_plane
+from bake_meshes import plane, tilted_plane
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.meshdata import MeshData

@@ -3,7 +3,7 @@ a plane baked 0.02 above its low-poly restores at that height in world space, an
 the texels re-displaces it on the same topology."""
 import mitsuba as mi
 import numpy as np
-from conftest import plane
+from bake_meshes import plane
 
 from mi_displace.bake.baker import bake
 from mi_displace.bake.restored_mesh import RestoredSurface
