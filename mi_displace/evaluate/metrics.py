@@ -144,65 +144,23 @@ def _as_trimesh(mesh, name: str):
     return result
 
 
-def point_mesh_distance(points, mesh, k: int = 16, chunk: int = 1 << 21) -> np.ndarray:
-    """Exact distance from each point to the closest point of a triangle mesh.
-
-    Triangles are found through a k-d tree of triangle centroids.  Every point of a
-    triangle T lies within ``R_T`` (its largest centroid-to-vertex distance) of its centroid
-    ``c_T``, so ``dist(p, T) >= |p - c_T| - R_T``.  Candidates are visited in order of
-    centroid distance; exact point-triangle distances (``trimesh.triangles.closest_point``)
-    are computed only where that bound beats the best distance found so far, and a point is
-    finished once its farthest visited centroid lies ``max R_T`` beyond its best distance.
-    Unfinished points are re-queried with k doubled (at most all faces).
+def point_mesh_distance(points, mesh) -> np.ndarray:
+    """Exact distance from each point to the closest point of a triangle mesh (libigl's
+    AABB tree, ``igl.point_mesh_squared_distance``).
 
     Args:
         points: ``(N, 3)`` query points.
         mesh: ``trimesh.Trimesh``.
-        k: initial number of candidate triangles per point.
-        chunk: bound on ``points x candidates`` handled at once (memory).
 
     Returns:
         float64 ``(N,)`` distances in the mesh's units.
     """
-    from scipy.spatial import cKDTree
-    from trimesh.triangles import closest_point
+    import igl
 
-    points = np.asarray(points, dtype=np.float64)
-    triangles = np.asarray(mesh.triangles, dtype=np.float64)
-    centroids = triangles.mean(axis=1)
-    radii = np.linalg.norm(triangles - centroids[:, None, :], axis=2).max(axis=1)
-    radius_max = float(radii.max())
-    tree = cKDTree(centroids)
-    n_faces = len(triangles)
-
-    def exact(rows, faces):
-        p = points[rows]
-        return np.linalg.norm(closest_point(triangles[faces], p) - p, axis=1)
-
-    result = np.full(len(points), np.inf)
-    todo = np.arange(len(points))
-    k_done, k = 0, min(k, n_faces)
-    while len(todo):
-        step = max(1, chunk // k)
-        unfinished = []
-        for start in range(0, len(todo), step):
-            idx = todo[start:start + step]
-            dist_c, face = tree.query(points[idx], k=k)
-            dist_c, face = dist_c.reshape(len(idx), k), face.reshape(len(idx), k)
-            best = result[idx]
-            if k_done == 0:  # the nearest centroid's triangle gives a first upper bound
-                best = exact(idx, face[:, 0])
-            new = slice(max(k_done, 1), k)
-            bound = dist_c[:, new] - radii[face[:, new]]
-            r, c = np.nonzero(bound < best[:, None])
-            if len(r):
-                np.minimum.at(best, r, exact(idx[r], face[:, new][r, c]))
-            result[idx] = best
-            finished = (k >= n_faces) | (dist_c[:, -1] - radius_max >= best)
-            unfinished.append(idx[~finished])
-        todo = np.concatenate(unfinished)
-        k_done, k = k, min(2 * k, n_faces)
-    return result
+    squared, _, _ = igl.point_mesh_squared_distance(
+        np.asarray(points, dtype=np.float64), np.asarray(mesh.vertices, dtype=np.float64),
+        np.asarray(mesh.faces, dtype=np.int64))
+    return np.sqrt(squared)
 
 
 def mesh_distance(a, b, samples: int = 100_000, seed: int = 0) -> dict:

@@ -116,7 +116,7 @@ def test_point_mesh_distance_matches_brute_force():
     p = np.repeat(points, len(triangles), axis=0)
     q = closest_point(np.tile(triangles, (len(points), 1, 1)), p)
     brute = np.linalg.norm(q - p, axis=1).reshape(len(points), -1).min(axis=1)
-    np.testing.assert_allclose(metrics.point_mesh_distance(points, mesh, k=2), brute, atol=1e-12)
+    np.testing.assert_allclose(metrics.point_mesh_distance(points, mesh), brute, atol=1e-12)
 
 
 def test_mesh_distance_bad_input():
