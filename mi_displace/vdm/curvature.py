@@ -80,56 +80,60 @@ def resample(t_flat: mi.Float, n_rows: int, theta_src: np.ndarray, theta_dst: np
         ``n_rows * n_c`` entries (row, c) in radians.
     """
     n_src, n_dst, n_c = len(theta_src), len(theta_dst), len(curvatures)
-    idx = dr.arange(mi.UInt32, n_rows * n_c)
+    # the angles as float32 arrays read in the loops (symbolic loops over the angles: one
+    # kernel per pass whatever n_src and n_dst, not an unrolled n_dst x n_src one)
+    sin_src, cos_src, dst = (mi.Float(np.asarray(a, np.float32))
+                             for a in (np.sin(theta_src), np.cos(theta_src), theta_dst))
+    n = n_rows * n_c
+    idx = dr.arange(mi.UInt32, n)
     row, ci = idx // n_c, idx % n_c
     c = dr.gather(mi.Float, mi.Float(np.asarray(curvatures, np.float32)), ci)
-    kept_theta, kept_val, kept_any = [], [], []
-    running = mi.Float(-1.0)
-    for i in range(n_src):  # loop over the (small) theta dimension, not over elements
+    # pass 1: bend every flat sample (theta' and d of each (row, c, i)); a sample is kept
+    # when its theta' exceeds every earlier kept one (a running maximum along i)
+    kept_theta, kept_val = dr.empty(mi.Float, n * n_src), dr.empty(mi.Float, n * n_src)
+    kept_any = dr.empty(mi.Bool, n * n_src)
+
+    def bend_step(i, running):
         t = dr.gather(mi.Float, t_flat, row * n_src + i)
-        st, ct = math.sin(theta_src[i]), math.cos(theta_src[i])
-        l, h = t * st, t * ct
+        l, h = t * dr.gather(mi.Float, sin_src, i), t * dr.gather(mi.Float, cos_src, i)
         x, y = bend(l, h, c)
         th = dr.atan2(x, -y)
-        r = dr.sqrt(x * x + y * y)
-        val = dr.select(l > 1e-7, l / dr.maximum(dr.sin(th), 1e-7), r)
+        val = dr.select(l > 1e-7, l / dr.maximum(dr.sin(th), 1e-7), dr.sqrt(x * x + y * y))
         valid = ((t >= 0) & (1.0 - c * h > 0) & (th >= 0) & (th > running)
                  & (th < math.pi / 2 + 1e-6))
-        running = dr.select(valid, th, running)
-        kept_theta.append(th)
-        kept_val.append(val)
-        kept_any.append(valid)
+        at = idx * n_src + i
+        dr.scatter(kept_theta, th, at)
+        dr.scatter(kept_val, val, at)
+        dr.scatter(kept_any, valid, at)
+        return i + 1, dr.select(valid, th, running)
+
+    _, running = dr.while_loop((dr.zeros(mi.UInt32, n), dr.full(mi.Float, -1.0, n)),
+                               lambda i, running: i < n_src, bend_step)
     theta_mvm = mvm_mod.maximal_view_angle(running, c, D if floor_depth is None else floor_depth)
-    outputs = []
-    for j in range(n_dst):
-        target = float(theta_dst[j])
-        out = mi.Float(-1.0)
-        first_val = mi.Float(-1.0)
-        found_first = mi.Bool(False)
-        prev_th, prev_val, have_prev = mi.Float(0.0), mi.Float(0.0), mi.Bool(False)
-        last_val = mi.Float(-1.0)
-        for i in range(n_src):
-            v, th, ok = kept_val[i], kept_theta[i], kept_any[i]
-            first_val = dr.select(ok & ~found_first, v, first_val)
-            found_first |= ok
-            seg = ok & have_prev & (prev_th <= target) & (target < th) & (out < 0)
-            w = (target - prev_th) / dr.maximum(th - prev_th, 1e-12)
-            out = dr.select(seg, dr.lerp(prev_val, v, w), out)
-            prev_th = dr.select(ok, th, prev_th)
-            prev_val = dr.select(ok, v, prev_val)
-            have_prev |= ok
-            last_val = dr.select(ok, v, last_val)
-        # below the first kept angle: hold the first value; beyond the last: -1 if the
-        # angle exceeds the MVM (no intersection), else hold the last value
-        below = found_first & (out < 0) & (target < prev_th)
-        out = dr.select(below, first_val, out)
-        beyond = found_first & (out < 0) & (target >= prev_th)
-        # -1 entries (target > theta_mvm) are replaced by the value at the MVM angle, a
-        # smooth continuation for the SVD (§3.3); the MVM keeps the silhouette
-        out = dr.select(beyond, last_val, out)
-        out = dr.select(found_first, out, 0.0)
-        outputs.append(out)
-    d = dr.zeros(mi.Float, n_rows * n_c * n_dst)
-    for j, out in enumerate(outputs):
-        dr.scatter(d, out, idx * n_dst + j)
-    return d, theta_mvm
+    # pass 2: per (row, c, j), linear interpolation of the kept (theta', d) at theta_dst[j]
+    lane = dr.arange(mi.UInt32, n * n_dst)
+    base, target = lane // n_dst * n_src, dr.gather(mi.Float, dst, lane % n_dst)
+
+    def lerp_step(i, out, first_val, found_first, prev_th, prev_val, have_prev, last_val):
+        v, th = dr.gather(mi.Float, kept_val, base + i), dr.gather(mi.Float, kept_theta, base + i)
+        ok = dr.gather(mi.Bool, kept_any, base + i)
+        first_val = dr.select(ok & ~found_first, v, first_val)
+        seg = ok & have_prev & (prev_th <= target) & (target < th) & (out < 0)
+        w = (target - prev_th) / dr.maximum(th - prev_th, 1e-12)
+        return (i + 1, dr.select(seg, dr.lerp(prev_val, v, w), out), first_val, found_first | ok,
+                dr.select(ok, th, prev_th), dr.select(ok, v, prev_val), have_prev | ok,
+                dr.select(ok, v, last_val))
+
+    m = n * n_dst
+    start = (dr.zeros(mi.UInt32, m), dr.full(mi.Float, -1.0, m), dr.full(mi.Float, -1.0, m),
+             dr.full(mi.Bool, False, m), dr.zeros(mi.Float, m), dr.zeros(mi.Float, m),
+             dr.full(mi.Bool, False, m), dr.full(mi.Float, -1.0, m))
+    _, out, first_val, found_first, prev_th, _, _, last_val = dr.while_loop(
+        start, lambda i, *_: i < n_src, lerp_step)
+    # below the first kept angle: hold the first value; beyond the last: -1 if the angle
+    # exceeds the MVM (no intersection), else hold the last value
+    out = dr.select(found_first & (out < 0) & (target < prev_th), first_val, out)
+    # -1 entries (target > theta_mvm) are replaced by the value at the MVM angle, a smooth
+    # continuation for the SVD (§3.3); the MVM keeps the silhouette
+    out = dr.select(found_first & (out < 0) & (target >= prev_th), last_val, out)
+    return dr.select(found_first, out, 0.0), theta_mvm
