@@ -343,18 +343,22 @@ def choose_resolution(base, tolerance: float, w_max: float, start: int = 32, bui
     the half still holds (not below :data:`MIN_MAP_RESOLUTION`).
 
     Returns:
-        ``(resolution, trials)`` with trials = [(R, relative error), ...].
+        ``(resolution, trials, maps)`` with trials = [(R, relative error), ...] and the maps
+        ``build(resolution)`` made for the trial (the caller keeps them, not a second build).
     """
     if not (math.isfinite(tolerance) and tolerance > 0):
         raise ValueError(f"ddm: 'tolerance' must be a positive number, got {tolerance!r}")
     diagonal = base_sample_diagonal(base)
     build = build or (lambda r: build_maps(base, r))
     measure = error or map_error
-    trials = {}
+    trials, built = {}, {}   # built: the maps of the last two trials (the answer is one of them)
 
     def error(r: int) -> float:
         if r not in trials:
-            trials[r] = measure(base, build(r), w_max) / diagonal
+            built[r] = build(r)
+            trials[r] = measure(base, built[r], w_max) / diagonal
+            while len(built) > 2:
+                del built[next(iter(built))]
         return trials[r]
 
     r = start
@@ -365,7 +369,7 @@ def choose_resolution(base, tolerance: float, w_max: float, start: int = 32, bui
             r *= 2
     while r // 2 >= MIN_MAP_RESOLUTION and error(r // 2) <= tolerance:
         r //= 2
-    return r, sorted(trials.items())
+    return r, sorted(trials.items()), built[r]
 
 
 def base_sample_diagonal(base, n: int = 64) -> float:

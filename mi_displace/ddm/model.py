@@ -181,10 +181,11 @@ class DDMModel:
                     self.base, sensors, to_world, cfg.dicing_rate)
                 self.resolution_rule = _footprint_rule(cfg.dicing_rate, len(sensors))
             elif self.auto:
-                cfg.map_resolution, self.auto_trials = self._resolution_by_tolerance()
+                cfg.map_resolution, self.auto_trials, self.maps = self._resolution_by_tolerance()
                 self.resolution_rule = (f"auto: tolerance {cfg.tolerance:g} of the diagonal "
                                         "(no sensor known)")
-            self.maps = self.maps_at(cfg.map_resolution)
+            if self.maps is None:
+                self.maps = self.maps_at(cfg.map_resolution)
         if self._all_valid_base() and self.maps is not None:
             bounds = np.array([[*t.positions[:, :2].min(0), *t.positions[:, :2].max(0)]
                                for t in self.tiles])
@@ -211,7 +212,8 @@ class DDMModel:
         ``tolerance`` (:func:`~mi_displace.ddm.base_maps.choose_resolution`; on a mesh base
         measured on per-chart maps at points whose lookups stay on one chart)."""
         if self._all_valid_base():
-            return base_maps.choose_resolution(self.base, self.cfg.tolerance, self._w_max())
+            return base_maps.choose_resolution(self.base, self.cfg.tolerance, self._w_max(),
+                                               build=self.maps_at)
         return base_maps.choose_resolution(self.base, self.cfg.tolerance, self._w_max(),
                                            build=self.maps_at, error=charts.map_error, order=1.0)
 

@@ -159,10 +159,11 @@ def torus_map_error(maps) -> float:
 
 def test_auto_resolution_meets_the_tolerance_with_the_smallest_power_of_two(variant):
     base = make_base("torus", major_radius=R_MAJOR, minor_radius=R_MINOR)
-    r, trials = base_maps.choose_resolution(base, 2e-4, W_MAX)
+    r, trials, maps = base_maps.choose_resolution(base, 2e-4, W_MAX)
     assert r & (r - 1) == 0
     # independent check (closed form, not map_error): r meets it, r / 2 does not
     assert torus_map_error(base_maps.build_maps(base, r)) <= 2e-4 * 1.02
+    assert maps.ru == r and torus_map_error(maps) == torus_map_error(base_maps.build_maps(base, r))
     assert torus_map_error(base_maps.build_maps(base, r // 2)) > 2e-4
     with pytest.raises(ValueError, match="tolerance"):
         base_maps.choose_resolution(base, 0.0, W_MAX)
@@ -174,7 +175,7 @@ def test_auto_check_catches_an_underestimating_map_error(variant, monkeypatch):
     base = make_base("torus", major_radius=R_MAJOR, minor_radius=R_MINOR)
     honest = base_maps.map_error
     monkeypatch.setattr(base_maps, "map_error", lambda *a, **k: 0.25 * honest(*a, **k))
-    r, _ = base_maps.choose_resolution(base, 2e-4, W_MAX)
+    r, _, _ = base_maps.choose_resolution(base, 2e-4, W_MAX)
     assert torus_map_error(base_maps.build_maps(base, r)) > 2e-4
 
 
@@ -227,10 +228,10 @@ def test_geometry_image_bytes_and_resolution_halving_gives_an_int(variant):
     assert maps.nbytes == 16 * 8 * (2 * 3 * 4 + 1) and type(maps.nbytes) is int
     base = make_base("torus")
     diagonal = base_maps.base_sample_diagonal(base)
-    r, trials = base_maps.choose_resolution(
+    r, trials, maps = base_maps.choose_resolution(
         base, 7e-4, 0.1, start=512, build=lambda r: r,
         error=lambda base, r, w: diagonal * 1e-2 * (32 / r) ** 2)
-    assert r == 128 and type(r) is int
+    assert r == 128 and type(r) is int and maps == 128   # the trial's build, kept
     assert [t[0] for t in trials] == [64, 128, 256, 512]
 
 
@@ -271,6 +272,6 @@ def test_prune_grows_the_footprint_by_one_texel_and_auto_starts_at_a_power_of_tw
     assert base_maps.prune(layout, np.array([[0.0, 0.0, 1.0, 0.3]]), maps)[1] == 1
     base = make_base("torus")
     diagonal = base_maps.base_sample_diagonal(base)
-    r, _ = base_maps.choose_resolution(base, 1.5e-2, 0.1, build=lambda r: r,
+    r, _, maps = base_maps.choose_resolution(base, 1.5e-2, 0.1, build=lambda r: r,
                                        error=lambda base, r, w: diagonal * 1e-2 * (32 / r) ** 2)
-    assert r == 32
+    assert r == 32 and maps == 32
