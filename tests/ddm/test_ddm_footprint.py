@@ -9,7 +9,8 @@ from ddm_helpers import spherical_cap, to_numpy as _np
 
 from mi_displace.ddm import base_maps, footprint
 from mi_displace.ddm.model import DDMConfig, DDMModel, make_base
-from mi_displace.render.scene import load
+from mi_displace import fit_to_sensors
+from mi_displace.render.scene import load, shape_stats
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = ROOT / "scenes" / "ddm_genus1.xml"
@@ -53,13 +54,17 @@ def _largest_texel_step(model, r, width):
 
 
 def test_auto_follows_the_screen_footprint_on_a_multi_chart_mesh(variant):
-    stats = {}
-    for res in (32, 64):
-        _, timings = load(SCENE, mode="approximation", integrator="raster", res=res,
+    scene, timings = load(SCENE, mode="approximation", integrator="raster", res=32,
                           map_resolution="auto")
-        st = next(s for s in timings["shapes"] if s["type"] == "DDM")
+    stats = {32: next(s for s in timings["shapes"] if s["type"] == "DDM")}
+    # the film doubled, then the scene fitted again (what a user does after a resize)
+    sensor = mi.traverse(scene.sensors()[0])
+    sensor["film.size"] = mi.ScalarVector2u(64, 64)
+    sensor.update()
+    fit_to_sensors(scene)
+    stats[64] = next(s for s in shape_stats(scene) if s["type"] == "DDM")
+    for st in stats.values():
         assert st["map_resolution_rule"].startswith("auto: screen footprint")
-        stats[res] = st
     r32, r64 = stats[32]["map_resolution"], stats[64]["map_resolution"]
     assert r64 == 2 * r32                    # twice the pixels, twice the texels
     # independent check: at R no texel step on screen exceeds ~1 px, at R / 2 some do
