@@ -53,6 +53,7 @@ import json as _json
 import resource
 import statistics
 import time
+from pathlib import Path
 from typing import NamedTuple
 
 import drjit as dr
@@ -428,6 +429,48 @@ def markdown(record: dict) -> str:
     return "\n".join(lines)
 
 
+#: Each technique's guide (docs/NAME.md) and the rows of its frames table, written between
+#: :data:`GUIDE_BEGIN` and :data:`GUIDE_END` by :func:`write_guides`.
+GUIDES = {"vdm.md": ("bump", "relief", "horizon", "vdm"),
+          "slicing.md": ("slicing_a", "slicing_best", "slicing_screen", "depth_object"),
+          "ddm.md": ("hddm_maps",), "bake.md": ("restored",), "volume.md": ("volume_slicer",),
+          "raster.md": ("raster_reference",)}
+GUIDE_BEGIN, GUIDE_END = "<!-- frames table: begin -->", "<!-- frames table: end -->"
+DOCS = Path(__file__).resolve().parents[2] / "docs"
+
+
+def guide_table(record: dict, names) -> str:
+    """The frames table of one guide: ``names``' rows of ``record`` (the orbit frame, the
+    fixed cost, the paper's rate and the ratio to it), the command and the machine's load."""
+    rows = {r["name"]: r for r in record["rows"]}
+    lines = [f"`mi-displace bench frames --out docs/figures` ([frames](frames.md), "
+             f"`figures/frames_bench.json`): {record['resolution']}², one sample per pixel, "
+             f"`{record['variant']}`, {record['cpu_count']} cores, load average "
+             f"{record['load_average']:.1f} at the end of the run.", "",
+             "| row | orbit frame ms | fps | paper fps | × paper | fixed ms (8²) | load s |",
+             "|---|---:|---:|---:|---:|---:|---:|"]
+    for name in names:
+        r = rows[name]
+        paper = "–" if r["paper_fps"] is None else "–".join(f"{f:g}" for f in dict.fromkeys(r["paper_fps"]))
+        ratio = "–" if r["fps_vs_paper"] is None else f"{r['fps_vs_paper']:.2f}"
+        lines.append(f"| `{name}` | {1e3 * r['orbit_frame_s']:.0f} | {r['fps']:.1f} | {paper} | {ratio} "
+                     f"| {1e3 * r['fixed_frame_s']:.1f} | {r['load_s']:.2f} |")
+    return "\n".join(lines)
+
+
+def guide_text(text: str, record: dict, names) -> str:
+    """``text`` (a guide) with its frames table (between the markers) made from ``record``."""
+    start, end = text.index(GUIDE_BEGIN) + len(GUIDE_BEGIN), text.index(GUIDE_END)
+    return text[:start] + "\n" + guide_table(record, names) + "\n" + text[end:]
+
+
+def write_guides(record: dict, docs: Path = DOCS) -> None:
+    """Rewrite the frames table of every guide of :data:`GUIDES` in ``docs`` from ``record``."""
+    for page, names in GUIDES.items():
+        path = docs / page
+        path.write_text(guide_text(path.read_text(), record, names))
+
+
 def main(json: bool = False, quick: bool = False, out=None) -> dict:
     """Run every row (:data:`QUICK` sizes with ``quick``); print JSON (``json``) or the markdown
     table; with ``out`` also write ``frames_bench.json`` there."""
@@ -436,3 +479,7 @@ def main(json: bool = False, quick: bool = False, out=None) -> dict:
         (output_dir("frames", out) / "frames_bench.json").write_text(_json.dumps(record, indent=2) + "\n")
     print(_json.dumps(record, indent=2) if json else markdown(record))
     return record
+
+
+if __name__ == "__main__":   # python -m mi_displace.bench.frames: the guides' tables from the record
+    write_guides(_json.loads((DOCS / "figures" / "frames_bench.json").read_text()))

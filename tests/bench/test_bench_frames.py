@@ -149,3 +149,22 @@ def test_volume_slicer_row_draws_one_ray_a_pixel(variant_llvm):
                         "spacing": 1.0, "aa": 1})
     assert np.isfinite(np.array(mine)).all()
     np.testing.assert_array_equal(np.array(mine), np.array(mi.render(scene, integrator=one, spp=1)))
+
+
+def test_every_row_is_in_one_guide_and_the_guides_match_the_record():
+    """Each row of ``ROWS`` appears in exactly one technique guide, and every guide's frames
+    table is what :func:`frames.guide_table` makes of docs/figures/frames_bench.json (the
+    numbers in the guides cannot drift from the recorded run)."""
+    import json
+
+    from mi_displace.bench import frames
+
+    listed = [name for names in frames.GUIDES.values() for name in names]
+    assert sorted(listed) == sorted(row.name for row in frames.ROWS)
+    record = json.loads((frames.DOCS / "figures" / "frames_bench.json").read_text())
+    for page, names in frames.GUIDES.items():
+        text = (frames.DOCS / page).read_text()
+        assert text == frames.guide_text(text, record, names), (
+            f"docs/{page}: frames table is stale: run python -m mi_displace.bench.frames")
+        for name in names:
+            assert f"| `{name}` |" in text
