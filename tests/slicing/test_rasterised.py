@@ -314,3 +314,52 @@ def test_a_camera_move_compiles_no_new_kernel(variant, direction):
     assert all(np.isfinite(img).all() for img in images)
     assert profile["kernels"] > 10
     assert profile["cache_misses"] == 0, profile
+
+
+@pytest.mark.parametrize("direction", ["a", "best"])
+def test_coherent_self_shadow_walk_is_the_incoherent_one(variant, helpers, monkeypatch, direction):
+    """During a raster frame the self-shadow walks query the slices as coherent rays
+    (Embree's packet traversal, faster for a frame's shadow rays); the walk finds the same
+    polygons: the same occlusion per sample and the same image as the incoherent walk;
+    after the frame (path tracing) the walks are incoherent again."""
+    from mi_displace.slicing import sliced
+
+    calls = []
+    walk = sliced.first_passing_slice
+
+    def recorded(*args, **kwargs):
+        calls.append(kwargs.get("coherent", args[8] if len(args) > 8 else False))
+        return walk(*args, **kwargs)
+
+    monkeypatch.setattr(sliced, "first_passing_slice", recorded)
+    sensor = helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=48)
+    img, scene = helpers.render({**donut(direction), "bsdf": helpers.MATERIAL}, sensor)
+    obj = next(s for s in scene.shapes() if hasattr(s, "volume"))
+    families = len(sliced.FAMILIES[direction])
+    assert calls and all(calls) and len(calls) % families == 0, calls   # every shadow walk
+    assert obj.volume.coherent is False   # cleared after the frame
+    # the same frame with the flag cleared: the incoherent walk of the same shadow rays
+    begin = type(obj).raster_begin
+
+    def incoherent(self, sensor, aa):
+        begin(self, sensor, aa)
+        self.volume.coherent = False
+
+    monkeypatch.setattr(type(obj), "raster_begin", incoherent)
+    calls.clear()
+    plain = np.array(mi.render(scene))[..., :3]
+    assert calls and not any(calls)
+    assert np.isfinite(img).all() and np.array_equal(img, plain)
+    # per sample: the frame's fragments lit by the sun, occluded alike either way
+    vol = obj.volume
+    hit = rasterised.draw(vol, mi.load_dict(sensor)).hit
+    normal = vol.normal(hit)
+    wl = dr.normalize(mi.Vector3f(0.4, -0.5, 0.75)) + dr.zeros(mi.Vector3f, dr.width(normal))
+    lit = hit.found & (dr.dot(normal, wl) > 0)
+    occluded = []
+    for coherent in (False, True):
+        vol.coherent = coherent
+        occluded.append(np.array(vol.occluded(hit, normal, wl, lit)))
+    vol.coherent = False
+    assert np.array(lit).mean() > 0.2 and 10 < occluded[0].sum() < np.array(lit).sum()
+    assert np.array_equal(occluded[0], occluded[1])
