@@ -135,8 +135,8 @@ class SlicedVolume:
         #: points towards the same light) query the slices as coherent rays
         #: (:func:`~mi_displace.slicing.trace.first_passing_slice`: the same polygons; the
         #: donut's raster frame at 512^2, scripts/coherent_ab.py with WHICH=slicing:
-        #: 0.75-0.78x (a), 0.86-0.89x (best); a path tracer's scattered shadow rays are
-        #: slower so: 1.36x)
+        #: 0.75-0.78x (a), 0.86-0.89x (best), 0.68-0.69x (screen); a path tracer's
+        #: scattered shadow rays are slower so: 1.36x)
         self.coherent = False
         #: object <-> world (Dr.Jit transforms): the family choice and the screen-space
         #: planes are made in object space, so any ``to_world`` moves them with the surface
@@ -206,7 +206,7 @@ class SlicedVolume:
         n = dr.width(origin)
         active = mi.Bool(active)
         if self.direction == "screen":
-            return self._find_screen(origin, d, active, t_floor)
+            return self._find_screen(origin, d, active, t_floor, coherent)
         found = dr.zeros(mi.Bool, n)
         hit = Hit(found, mi.Point3f(origin), dr.zeros(mi.Point2f, n), dr.zeros(mi.Vector3f, n),
                   dr.zeros(mi.Vector3f, n), dr.zeros(mi.Vector3f, n))
@@ -242,19 +242,19 @@ class SlicedVolume:
                             lambda o, w, c, m, f: drawn.fields(), label="slicing_walk")
         return drawn.select(use, Hit(*walked))
 
-    def _find_screen(self, origin, d, active, t_floor=None):
+    def _find_screen(self, origin, d, active, t_floor=None, coherent=False):
         """§3.3: planes perpendicular to the ray, p . d = k delta, clipped to the volume (a
         parametric base's exact coordinates; a mesh base's by :attr:`mesh_coords`, from the
         extrusion where the ray enters the volume).  Made in object space (p, d, delta = scale / N there), so
         that ``to_world`` moves them with the surface; the ray parameter t is shared."""
         never = lambda uv, h: dr.zeros(mi.Bool, dr.width(h))
         *_, t_in, t_out, bottom = first_passing_slice(self.walls_scene, origin, d, never, active, 64,
-                                                      t_floor=t_floor)
+                                                      t_floor=t_floor, coherent=coherent)
         t_out = dr.select(dr.isinf(t_out), t_in, t_out)
         base, mesh = self.bm.base, self.mesh_coords
         o_obj, d_obj = self.to_object @ mi.Point3f(origin), self.to_object @ mi.Vector3f(d)
         if mesh is not None:   # the fixed point's first guess: the extrusion where the ray enters
-            pi = self.walls_scene.scene.ray_intersect_preliminary(mi.Ray3f(origin, d), active)
+            pi = self.walls_scene.scene.ray_intersect_preliminary(mi.Ray3f(origin, d), coherent, active=active)
             guess = self.walls_scene.frame(pi.prim_index, (pi.prim_uv.x, pi.prim_uv.y), active)[0]
 
         def coords(p):   # p: object space; the frame (n, su, sv) [world] on a mesh

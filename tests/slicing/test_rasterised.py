@@ -316,12 +316,13 @@ def test_a_camera_move_compiles_no_new_kernel(variant, direction):
     assert profile["cache_misses"] == 0, profile
 
 
-@pytest.mark.parametrize("direction", ["a", "best"])
+@pytest.mark.parametrize("direction", ["a", "best", "screen"])
 def test_coherent_self_shadow_walk_is_the_incoherent_one(variant, helpers, monkeypatch, direction):
-    """During a raster frame the self-shadow walks query the slices as coherent rays
-    (Embree's packet traversal, faster for a frame's shadow rays); the walk finds the same
-    polygons: the same occlusion per sample and the same image as the incoherent walk;
-    after the frame (path tracing) the walks are incoherent again."""
+    """During a raster frame the slicing walks (self-shadows; the view rays of screen
+    slicing, which is never rasterised) query the slices as coherent rays (Embree's packet
+    traversal, faster for a frame's rays); the walk finds the same polygons: the same
+    occlusion per sample and the same image as the incoherent walk; after the frame (path
+    tracing) the walks are incoherent again."""
     from mi_displace.slicing import sliced
 
     calls = []
@@ -335,8 +336,7 @@ def test_coherent_self_shadow_walk_is_the_incoherent_one(variant, helpers, monke
     sensor = helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=48)
     img, scene = helpers.render({**donut(direction), "bsdf": helpers.MATERIAL}, sensor)
     obj = next(s for s in scene.shapes() if hasattr(s, "volume"))
-    families = len(sliced.FAMILIES[direction])
-    assert calls and all(calls) and len(calls) % families == 0, calls   # every shadow walk
+    assert calls and all(calls), calls   # every walk of the frame
     assert obj.volume.coherent is False   # cleared after the frame
     # the same frame with the flag cleared: the incoherent walk of the same shadow rays
     begin = type(obj).raster_begin
@@ -350,6 +350,8 @@ def test_coherent_self_shadow_walk_is_the_incoherent_one(variant, helpers, monke
     plain = np.array(mi.render(scene))[..., :3]
     assert calls and not any(calls)
     assert np.isfinite(img).all() and np.array_equal(img, plain)
+    if direction == "screen":   # planes, not rasterised: no fragments to compare
+        return
     # per sample: the frame's fragments lit by the sun, occluded alike either way
     vol = obj.volume
     hit = rasterised.draw(vol, mi.load_dict(sensor)).hit
