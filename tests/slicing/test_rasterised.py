@@ -82,6 +82,47 @@ def test_slices_rasterised_by_rows_are_those_of_every_candidate(variant, helpers
                               np.array(getattr(boxes.hit, name))[:, found]), name
 
 
+@pytest.mark.parametrize("direction", ["a", "best"])
+def test_slivers_drawn_whole_are_those_drawn_by_rows(variant, helpers, monkeypatch, direction):
+    """Slivers (boxes at most SPAN wide, TALL tall: the orthogonal slices, the walls) drawn
+    by one thread each looping over their rows: bit-identical keys of every pass of the
+    donut's frame (walls, base polygons, slices; alpha-tested) to the same triangles drawn
+    by one thread per row piece (TALL 0)."""
+    sensor = mi.load_dict(helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=96))
+    _, scene = helpers.render({**donut(direction), "bsdf": helpers.MATERIAL},
+                              helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=8))
+    vol = next(s for s in scene.shapes() if hasattr(s, "volume")).volume
+    passes, slivers, rasterise = [], [], zbuffer.rasterise
+
+    def recorded(view, geom, *args, **kwargs):
+        keys, clip = rasterise(view, geom, *args, **kwargs)
+        passes.append(np.array(keys))
+        return keys, clip
+
+    def counted_loop(state, cond, body, label=None, **kwargs):
+        slivers.append(label == "raster_slivers" and dr.width(state[0]))
+        return loop(state, cond, body, label=label, **kwargs)
+
+    loop = dr.while_loop
+    monkeypatch.setattr(zbuffer, "rasterise", recorded)
+    monkeypatch.setattr(zbuffer.dr, "while_loop", counted_loop)
+    whole = rasterised.draw(vol, sensor)
+    drawn_whole, passes[:] = list(passes), []
+    assert sum(slivers) > 50, slivers   # slivers were drawn whole
+    monkeypatch.setattr(zbuffer, "TALL", 0)
+    slivers.clear()
+    rows = rasterised.draw(vol, sensor)
+    assert not any(slivers)
+    assert len(passes) == len(drawn_whole) >= 2
+    for a, b in zip(drawn_whole, passes):
+        assert np.array_equal(a, b)
+    found = np.array(whole.hit.found)
+    assert found.mean() > 0.2 and np.array_equal(found, np.array(rows.hit.found))
+    for name in ("p", "uv", "n", "su", "sv"):
+        assert np.array_equal(np.array(getattr(whole.hit, name))[:, found],
+                              np.array(getattr(rows.hit, name))[:, found]), name
+
+
 @pytest.mark.parametrize("alpha", ["basic", "ramp"])
 def test_aligned_prisms_are_the_slice_polygons(variant, helpers, monkeypatch, alpha):
     """Direction a drawn as prisms, front to back with an early exit and a slice-0 depth
