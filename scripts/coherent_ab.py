@@ -13,7 +13,9 @@ shared machine.
 
 Frames are drawn by ``raster`` with aa=1 at one sample per pixel, as ``mi-displace bench
 frames`` draws them.  Environment: WHICH (``both``, ``raster`` or ``slicing``: the flags
-cleared in the incoherent frames), REPS (7), ROUNDS (3)."""
+cleared in the incoherent frames; ``all``: both, and the z-buffer's slivers drawn by row
+pieces in those frames too, ``zbuffer.TALL`` 0, i.e. every frame lever of this kind against
+none), REPS (7), ROUNDS (3)."""
 import os
 import statistics
 import sys
@@ -29,12 +31,13 @@ def main(scene_file: str, *params: str) -> None:
     import mi_displace
     mi_displace.init()
     from mi_displace.core.resources import scene_path
-    from mi_displace.render import raster
+    from mi_displace.render import raster, zbuffer
     from mi_displace.render.scene import load
 
     which = os.environ.get("WHICH", "both")
-    if which not in ("both", "raster", "slicing"):
-        sys.exit(f"WHICH must be both, raster or slicing, not {which!r}")
+    if which not in ("both", "raster", "slicing", "all"):
+        sys.exit(f"WHICH must be both, raster, slicing or all, not {which!r}")
+    tall = zbuffer.TALL
     values = {"integrator": "raster", "res": 512}
     values.update(p.split("=", 1) for p in params)
     scene, _ = load(scene_path(scene_file), **values)
@@ -43,6 +46,7 @@ def main(scene_file: str, *params: str) -> None:
 
     def frame(coherent: bool) -> np.ndarray:
         raster.COHERENT = coherent or which == "slicing"
+        zbuffer.TALL = tall if coherent or which != "all" else 0
         begins = []
         for shape in sliced if which != "raster" else []:   # a handful of shapes
             begin = type(shape).raster_begin
@@ -55,7 +59,7 @@ def main(scene_file: str, *params: str) -> None:
         try:
             return np.asarray(mi.render(scene, integrator=integrator, spp=1), np.float32)
         finally:
-            raster.COHERENT = True
+            raster.COHERENT, zbuffer.TALL = True, tall
             for cls, begin in begins:
                 cls.raster_begin = begin
 
