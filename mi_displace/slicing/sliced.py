@@ -259,7 +259,7 @@ class SlicedVolume:
 
         def coords(p):   # p: object space; the frame (n, su, sv) [world] on a mesh
             if mesh is not None:
-                return mesh(self.to_world @ mi.Point3f(p), guess, active)
+                return mesh(self.to_world @ mi.Point3f(p), guess, active, coherent)
             u, v, dist, inside = geo.base_coordinates(base, p)
             return mi.Point2f(u, v), dist / self.kernel_scale, inside, None
 
