@@ -152,6 +152,7 @@ class Slicing(mi.Mesh):
         ``rasterise`` is false, the slices are screen-space planes or the sensor is not one
         the z-buffer projects (perspective, orthographic): then they are walked."""
         pinhole = sensor.class_name() in ("PerspectiveCamera", "OrthographicCamera")
+        self.volume.coherent = True   # the frame's lanes: its samples in pixel order
         if self.rasterise and pinhole and self.volume.direction != "screen":
             from mi_displace.slicing.rasterised import draw
             self.volume.frame = draw(self.volume, sensor, aa)
@@ -159,6 +160,7 @@ class Slicing(mi.Mesh):
     def raster_end(self) -> None:
         """Called after the frame: later renders (``path``, another view) walk again."""
         self.volume.frame = None
+        self.volume.coherent = False
 
     def traverse(self, cb):
         super().traverse(cb)

@@ -12,9 +12,10 @@ ratio: both versions see the same moments of a shared machine.
     SCENE    a file in scenes/ (e.g. slicing_plane_grazing.xml); name=value: its defaults
              (mode=approximation integrator=raster are set unless given)
 
-Environment: REPS (9), ROUNDS (3).  The scene's integrator renders both frames; the
-modules' other users in the process see the swap too (a module's functions look up its
-globals, so the old functions call the old helpers)."""
+Environment: REPS (9), ROUNDS (3), AA (unset: the scene's integrator renders both frames;
+a number: ``raster`` with that ``aa`` at one sample a pixel, as ``mi-displace bench frames``
+draws with AA=1).  The modules' other users in the process see the swap too (a module's
+functions look up its globals, so the old functions call the old helpers)."""
 import importlib
 import os
 import statistics
@@ -61,10 +62,11 @@ def main(base: str, modules: str, scene: str, *params: str) -> None:
     defaults = {"mode": "approximation", "integrator": "raster"}
     defaults.update(p.split("=", 1) for p in params)
     loaded = mi.load_file(str(ROOT / "scenes" / scene), **defaults)
+    integrator = mi.load_dict({"type": "raster", "aa": int(os.environ["AA"])}) if "AA" in os.environ else None
 
     def frame(which: str) -> np.ndarray:
         use(which)
-        return np.asarray(mi.render(loaded), np.float32)
+        return np.asarray(mi.render(loaded, integrator=integrator, spp=1 if integrator else 0), np.float32)
 
     a, b = frame("old"), frame("new")
     print(f"identical: {np.array_equal(a, b)}, max |difference| {float(np.abs(a - b).max()):.3g}, "

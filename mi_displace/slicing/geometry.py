@@ -479,13 +479,15 @@ class MeshCoordinates:
         self.nbytes = sm.nbytes()   # of the base triangles' buffers
         self.scale = dr.opaque(mi.Float, scale)   # object units (e is world per unit scale)
 
-    def __call__(self, p: mi.Point3f, e: mi.Vector3f, active: mi.Bool):
+    def __call__(self, p: mi.Point3f, e: mi.Vector3f, active: mi.Bool, coherent: bool = False):
         """(uv, h, inside, (e, su, sv) at the foot) of world points ``p``, iterating from
-        the extrusion guess ``e`` (world, any length); ``inside``: a foot was found."""
+        the extrusion guess ``e`` (world, any length); ``inside``: a foot was found.
+        ``coherent``: neighbouring lanes hold neighbouring points (a raster frame's samples),
+        the queries use Embree's coherent flag (the same feet)."""
         base = self.base
         for _ in range(self.ITERATIONS):
             ray = mi.Ray3f(p, -dr.normalize(e))
-            pi = base.scene.ray_intersect_preliminary(ray, active)
+            pi = base.scene.ray_intersect_preliminary(ray, coherent, active=active)
             ok = active & pi.is_valid()
             bary = (pi.prim_uv.x, pi.prim_uv.y)
             foot, su, sv = base.frame(pi.prim_index, bary, ok)

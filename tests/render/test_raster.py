@@ -61,6 +61,24 @@ def test_raster_is_bit_identical_between_runs(variant):
     assert np.array_equal(render(sc), render(sc))
 
 
+def test_coherent_rays_find_the_incoherent_hits(variant, monkeypatch):
+    """The frame's rays are traced as coherent rays (raster.COHERENT: Embree's packet
+    traversal): the same hits, so the same image bit for bit as incoherent tracing, with a
+    card passed through by the alpha test, shadow rays to delta lights and an area light."""
+    from mi_displace.render import raster
+    card = {"card": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate(
+        [0, -4, 1.2]).rotate([1, 0, 0], 90).scale(0.15),
+        "bsdf": {"type": "mask", "opacity": {"type": "rgb", "value": 0.2}, "bsdf": {"type": "diffuse"}}},
+        "lamp": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([2, -2, 4]).scale(0.5),
+                 "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 5.0}}}}
+    sc = scene({"type": "raster", "aa": 2}, lights=("point", "sun", "ambient"), extra=card)
+    assert raster.COHERENT is True
+    coherent = render(sc)
+    monkeypatch.setattr(raster, "COHERENT", False)
+    incoherent = render(sc)
+    assert coherent.mean() > 0.02 and np.array_equal(coherent, incoherent)
+
+
 def test_ambient_equals_path_on_convex_diffuse(variant):
     """A convex diffuse sphere under a constant emitter: albedo x L is exact."""
     sphere = {"type": "sphere", "bsdf": {"type": "diffuse",

@@ -82,6 +82,47 @@ def test_slices_rasterised_by_rows_are_those_of_every_candidate(variant, helpers
                               np.array(getattr(boxes.hit, name))[:, found]), name
 
 
+@pytest.mark.parametrize("direction", ["a", "best"])
+def test_slivers_drawn_whole_are_those_drawn_by_rows(variant, helpers, monkeypatch, direction):
+    """Slivers (boxes at most SPAN wide, TALL tall: the orthogonal slices, the walls) drawn
+    by one thread each looping over their rows: bit-identical keys of every pass of the
+    donut's frame (walls, base polygons, slices; alpha-tested) to the same triangles drawn
+    by one thread per row piece (TALL 0)."""
+    sensor = mi.load_dict(helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=96))
+    _, scene = helpers.render({**donut(direction), "bsdf": helpers.MATERIAL},
+                              helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=8))
+    vol = next(s for s in scene.shapes() if hasattr(s, "volume")).volume
+    passes, slivers, rasterise = [], [], zbuffer.rasterise
+
+    def recorded(view, geom, *args, **kwargs):
+        keys, clip = rasterise(view, geom, *args, **kwargs)
+        passes.append(np.array(keys))
+        return keys, clip
+
+    def counted_loop(state, cond, body, label=None, **kwargs):
+        slivers.append(label == "raster_slivers" and dr.width(state[0]))
+        return loop(state, cond, body, label=label, **kwargs)
+
+    loop = dr.while_loop
+    monkeypatch.setattr(zbuffer, "rasterise", recorded)
+    monkeypatch.setattr(zbuffer.dr, "while_loop", counted_loop)
+    whole = rasterised.draw(vol, sensor)
+    drawn_whole, passes[:] = list(passes), []
+    assert sum(slivers) > 50, slivers   # slivers were drawn whole
+    monkeypatch.setattr(zbuffer, "TALL", 0)
+    slivers.clear()
+    rows = rasterised.draw(vol, sensor)
+    assert not any(slivers)
+    assert len(passes) == len(drawn_whole) >= 2
+    for a, b in zip(drawn_whole, passes):
+        assert np.array_equal(a, b)
+    found = np.array(whole.hit.found)
+    assert found.mean() > 0.2 and np.array_equal(found, np.array(rows.hit.found))
+    for name in ("p", "uv", "n", "su", "sv"):
+        assert np.array_equal(np.array(getattr(whole.hit, name))[:, found],
+                              np.array(getattr(rows.hit, name))[:, found]), name
+
+
 @pytest.mark.parametrize("alpha", ["basic", "ramp"])
 def test_aligned_prisms_are_the_slice_polygons(variant, helpers, monkeypatch, alpha):
     """Direction a drawn as prisms, front to back with an early exit and a slice-0 depth
@@ -314,3 +355,54 @@ def test_a_camera_move_compiles_no_new_kernel(variant, direction):
     assert all(np.isfinite(img).all() for img in images)
     assert profile["kernels"] > 10
     assert profile["cache_misses"] == 0, profile
+
+
+@pytest.mark.parametrize("direction", ["a", "best", "screen"])
+def test_coherent_self_shadow_walk_is_the_incoherent_one(variant, helpers, monkeypatch, direction):
+    """During a raster frame the slicing walks (self-shadows; the view rays of screen
+    slicing, which is never rasterised) query the slices as coherent rays (Embree's packet
+    traversal, faster for a frame's rays); the walk finds the same polygons: the same
+    occlusion per sample and the same image as the incoherent walk; after the frame (path
+    tracing) the walks are incoherent again."""
+    from mi_displace.slicing import sliced
+
+    calls = []
+    walk = sliced.first_passing_slice
+
+    def recorded(*args, **kwargs):
+        calls.append(kwargs.get("coherent", args[8] if len(args) > 8 else False))
+        return walk(*args, **kwargs)
+
+    monkeypatch.setattr(sliced, "first_passing_slice", recorded)
+    sensor = helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=48)
+    img, scene = helpers.render({**donut(direction), "bsdf": helpers.MATERIAL}, sensor)
+    obj = next(s for s in scene.shapes() if hasattr(s, "volume"))
+    assert calls and all(calls), calls   # every walk of the frame
+    assert obj.volume.coherent is False   # cleared after the frame
+    # the same frame with the flag cleared: the incoherent walk of the same shadow rays
+    begin = type(obj).raster_begin
+
+    def incoherent(self, sensor, aa):
+        begin(self, sensor, aa)
+        self.volume.coherent = False
+
+    monkeypatch.setattr(type(obj), "raster_begin", incoherent)
+    calls.clear()
+    plain = np.array(mi.render(scene))[..., :3]
+    assert calls and not any(calls)
+    assert np.isfinite(img).all() and np.array_equal(img, plain)
+    if direction == "screen":   # planes, not rasterised: no fragments to compare
+        return
+    # per sample: the frame's fragments lit by the sun, occluded alike either way
+    vol = obj.volume
+    hit = rasterised.draw(vol, mi.load_dict(sensor)).hit
+    normal = vol.normal(hit)
+    wl = dr.normalize(mi.Vector3f(0.4, -0.5, 0.75)) + dr.zeros(mi.Vector3f, dr.width(normal))
+    lit = hit.found & (dr.dot(normal, wl) > 0)
+    occluded = []
+    for coherent in (False, True):
+        vol.coherent = coherent
+        occluded.append(np.array(vol.occluded(hit, normal, wl, lit)))
+    vol.coherent = False
+    assert np.array(lit).mean() > 0.2 and 10 < occluded[0].sum() < np.array(lit).sum()
+    assert np.array_equal(occluded[0], occluded[1])

@@ -73,3 +73,38 @@ def test_screen_on_a_mesh_follows_to_world(variant, tmp_path):
     mesh, plane = (render(cam, {"type": "slicing", **base, **common})
                    for base in ({"base": "mesh", "filename": path}, {"base": "plane"}))
     assert differ(mesh, plane) < 0.01
+
+
+def test_mesh_coordinates_queried_as_coherent_rays_in_a_raster_frame(variant, tmp_path, monkeypatch):
+    """During a raster frame the foot queries of screen slicing on a mesh base use Embree's
+    coherent flag (the frame's samples are neighbouring points): the same feet, so the same
+    image bit for bit as incoherent queries."""
+    from mi_displace.slicing import geometry as geo
+
+    path = uv_sphere_obj(tmp_path / "sphere.obj", nu=32, nv=16)
+    cam = sensor()
+    cam["film"].update(width=32, height=32)
+    cam["to_world"] = mi.ScalarTransform4f().look_at(origin=[1.5, -3.6, 2.0], target=[0, 0, 0], up=[0, 0, 1])
+    shape = {"type": "slicing", "base": "mesh", "filename": path, "slices": 8, "scale": 0.15,
+             "direction": "screen", "height": {"type": "bricks", "rows": 8, "columns": 8}}
+    flags, call = [], geo.MeshCoordinates.__call__
+
+    def recorded(self, p, e, active, coherent=False):
+        flags.append(coherent)
+        return call(self, p, e, active, coherent)
+
+    monkeypatch.setattr(geo.MeshCoordinates, "__call__", recorded)
+    coherent = render(cam, shape)
+    assert flags and all(flags)
+    flags.clear()
+    from mi_displace.plugins.slicing import Slicing
+    begin = Slicing.raster_begin
+
+    def incoherent(self, sensor, aa):
+        begin(self, sensor, aa)
+        self.volume.coherent = False
+
+    monkeypatch.setattr(Slicing, "raster_begin", incoherent)
+    plain = render(cam, shape)
+    assert flags and not any(flags)
+    assert (plain.sum(-1) > 0.05).mean() > 0.2 and np.array_equal(coherent, plain)

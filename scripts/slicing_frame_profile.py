@@ -1,0 +1,129 @@
+"""Where the sliced donut's raster frame goes (one process; ratios hold on a shared machine).
+
+    ./.venv/bin/python scripts/slicing_frame_profile.py [DIRECTION] [RES]
+
+DIRECTION a or best (default best), RES the film side (512), on ``slicing_donut.xml`` as
+``mi-displace bench frames`` draws it (``raster``, aa=1, one sample a pixel).  Prints
+
+* the median wall seconds, over frames drawn alternately, of the whole frame, of the
+  z-buffer passes alone (``mi_displace.slicing.rasterised.draw``) and of the frame with the
+  slicing BSDF's self-shadows off: frame - (no self-shadows) is the self-shadow walk, the
+  rest of the no-self-shadow frame beyond the passes is visibility and shading;
+* per slice family, the self-shadow walk's BVH queries per walking sample (the sun's
+  direction from every fragment the passes found and the light faces; mean, median, 95th
+  percentile, maximum) and the queries a SIMD packet of 16 neighbouring samples makes
+  (the most of its lanes) over those of the lanes;
+* the frame's kernels by execution time (``dr.JitFlag.KernelHistory``) with the labels of
+  the symbolic loops and ifs they hold."""
+import re
+import statistics
+import sys
+import time
+import types
+
+import numpy as np
+
+ROUNDS, REPS, KERNELS = 3, 5, 10
+
+
+def main(direction: str = "best", res: str = "512") -> None:
+    import drjit as dr
+    import mitsuba as mi
+
+    import mi_displace
+    mi_displace.init()
+    from mi_displace.core.resources import scene_path
+    from mi_displace.render.scene import load
+    from mi_displace.slicing import rasterised, trace
+    from mi_displace.slicing.sliced import FAMILIES
+
+    scene, _ = load(scene_path("slicing_donut.xml"), mode="approximation", integrator="raster",
+                    direction=direction, res=int(res))
+    integrator = mi.load_dict({"type": "raster", "aa": 1})
+    shape = next(s for s in scene.shapes() if hasattr(s, "raster_begin"))
+    bsdf, volume, sensor = shape.bsdf(), shape.volume, scene.sensors()[0]
+
+    def frame():
+        dr.eval(mi.render(scene, integrator=integrator, spp=1))
+
+    def passes():
+        drawn = rasterised.draw(volume, sensor, 1)
+        dr.eval(drawn.packed, drawn.found)
+
+    def unshadowed():
+        bsdf.self_shadows = False
+        try:
+            frame()
+        finally:
+            bsdf.self_shadows = True
+
+    cases = {"frame": frame, "z-buffer passes": passes, "frame without self-shadows": unshadowed}
+    for step in cases.values():
+        step()
+    used = {fam: volume.counts[fam] for fam in FAMILIES[direction]}
+    print(f"slicing_donut.xml direction={direction} at {res}^2, slices {used}")
+    for _ in range(ROUNDS):
+        times = {name: [] for name in cases}
+        for _ in range(REPS):
+            for name, step in cases.items():
+                dr.sync_thread()
+                start = time.perf_counter()
+                step()
+                dr.sync_thread()
+                times[name].append(time.perf_counter() - start)
+        med = {name: statistics.median(t) for name, t in times.items()}
+        walk = med["frame"] - med["frame without self-shadows"]
+        rest = med["frame without self-shadows"] - med["z-buffer passes"]
+        print("  ".join(f"{name} {1e3 * t:.0f} ms" for name, t in med.items())
+              + f"  | shares: self-shadow walk {walk / med['frame']:.2f}, passes "
+              f"{med['z-buffer passes'] / med['frame']:.2f}, rest {rest / med['frame']:.2f}")
+
+    # the self-shadow walk's queries: the walk's loops counted (trace's while_loop wrapped)
+    drawn = rasterised.draw(volume, sensor, 1)
+    hit = drawn.hit
+    sun = next(e for e in scene.emitters() if e.class_name() == "DirectionalEmitter")
+    wl = dr.normalize(-mi.Vector3f(sun.world_transform() @ mi.ScalarVector3f(0, 0, 1)))
+    wl = wl + dr.zeros(mi.Vector3f, dr.width(hit.found))
+    normal = volume.normal(hit)
+    walking = drawn.covered & hit.found & (dr.dot(normal, wl) > 0)
+    counts, loop = [], dr.while_loop
+
+    def counted(state, cond, body, **kwargs):
+        kwargs.pop("labels", None)
+        out = loop((*state, dr.zeros(mi.UInt32, dr.width(state[3]))), lambda *s: cond(*s[:-1]),
+                   lambda *s: (*body(*s[:-1]), s[-1] + 1), **kwargs)
+        counts.append((out[-1], state[3]))
+        return out[:-1]
+
+    trace.dr = types.SimpleNamespace(**{**{k: getattr(dr, k) for k in dir(dr) if not k.startswith("__")},
+                                        "while_loop": counted})
+    try:
+        dr.eval(volume.occluded(hit, normal, wl, walking))
+    finally:
+        trace.dr = dr
+    for fam, (queries, lanes) in zip(FAMILIES[direction], counts):
+        q, on = np.array(queries), np.array(lanes)
+        packets = q[: len(q) // 16 * 16].reshape(-1, 16).max(1).sum() * 16
+        print(f"family {fam}: {on.sum()} walking samples, queries mean {q[on].mean():.1f} median "
+              f"{np.median(q[on]):.0f} p95 {np.percentile(q[on], 95):.0f} max {q.max()}; "
+              f"packets of 16 / lanes {packets / q.sum():.2f}")
+
+    dr.kernel_history()
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory):
+        dr.sync_thread()
+        start = time.perf_counter()
+        frame()
+        dr.sync_thread()
+        wall = time.perf_counter() - start
+    history = dr.kernel_history()
+    print(f"profiled frame {1e3 * wall:.0f} ms, {len(history)} launches, kernels "
+          f"{sum(h['execution_time'] for h in history) / 1e3 / wall:.2f} of it; the largest:")
+    for h in sorted(history, key=lambda h: -h["execution_time"])[:KERNELS]:
+        ir = h.get("ir")
+        text = ir.getvalue() if hasattr(ir, "getvalue") else str(ir or "")
+        labels = sorted(set(re.findall(r"(?:raster|slicing)_[a-z_]+", text)))
+        print(f"  {h['execution_time']:8.1f} ms  size {h['size']:>8}  {', '.join(labels) or h['type'].name}")
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])
