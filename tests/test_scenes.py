@@ -155,16 +155,18 @@ def test_approximation_agrees_with_reference_as_documented(variant, path, elsewh
     assert (shifted > bound) != (path.stem in COARSE), (shifted, bound)
 
 
-#: volume scene -> (FLIP bound at 96-128², where docs/volume.md documents it).
+#: volume scene -> (FLIP bound at 256², where docs/volume.md documents it).
 VOLUME_BOUNDS = {
-    "volume_consistency": (0.0092, "docs/volume.md, compares: volume_consistency FLIP 0.0092"),
-    "volume_walnut_peel": (0.0877, "docs/volume.md, compares: volume_walnut_peel FLIP 0.0877"),
-    "volume_nucleon_pull": (0.0117, "docs/volume.md, compares: volume_nucleon_pull FLIP 0.0117"),
-    "volume_piggy_seam": (0.0104, "docs/volume.md, compares: volume_piggy_seam FLIP 0.0104"),
-    "volume_composite_wave_peel": (0.0229, "docs/volume.md, compares: wave then peel FLIP 0.0229"),
-    "volume_composite_peel_wave": (0.0230, "docs/volume.md, compares: peel then wave FLIP 0.0230"),
-    "volume_piggy_surface": (0.0553, "docs/volume.md, compares: volume_piggy_surface FLIP 0.0553"),
-    "volume_piggy_albedo": (0.0104, "docs/volume.md, compares: volume_piggy_albedo FLIP 0.0104"),
+    "volume_consistency": (0.0060, "docs/volume.md, Accuracy: volume_consistency FLIP 0.0060"),
+    "volume_walnut_peel": (0.0440, "docs/volume.md, Accuracy: volume_walnut_peel FLIP 0.0440"),
+    "volume_nucleon_pull": (0.0100, "docs/volume.md, Accuracy: volume_nucleon_pull FLIP 0.0100"),
+    "volume_piggy_seam": (0.0100, "docs/volume.md, Accuracy: volume_piggy_seam FLIP 0.0100"),
+    "volume_composite_wave_peel": (0.0174,
+                                   "docs/volume.md, Accuracy: volume_composite_wave_peel FLIP 0.0174"),
+    "volume_composite_peel_wave": (0.0168,
+                                   "docs/volume.md, Accuracy: volume_composite_peel_wave FLIP 0.0168"),
+    "volume_piggy_surface": (0.0571, "docs/volume.md, Accuracy: volume_piggy_surface FLIP 0.0571"),
+    "volume_piggy_albedo": (0.0101, "docs/volume.md, Accuracy: volume_piggy_albedo FLIP 0.0101"),
 }
 
 
