@@ -73,7 +73,7 @@ class Sizes(NamedTuple):
     repeats: int
     flip_res: int
     flip_max_spp: int
-    grid_res: int = 128
+    grid_res: int = 256
     grid_spp: int = 64
     grid_repeats: int = 3
 
