@@ -39,6 +39,11 @@ SPEC = PluginSpec(
               "(the quality knob of area lights)", low=1, high=lights.MAX_AREA_SAMPLES),
         Param("area_shadow_resolution", "int", _DEFAULTS.area_shadow_resolution, "cube shadow-map "
               "texels per side of each area-light point (shadows=map)", low=1, high=16384),
+        Param("freeze", "bool", False, "record the frame's kernels once (`dr.freeze`) and replay "
+              "them: a frame costs its kernels, not Python tracing and launches; recorded again "
+              "when an `mi.traverse` parameter's layout or scalar value changes; scenes Dr.Jit "
+              "cannot record (slicing shapes, BSDFs that read back) are drawn unfrozen with one "
+              "warning; needs visibility=raytrace, shadows=ray or none"),
     ),
     example="""<integrator type="raster">
     <string name="shadows" value="ray"/>
@@ -61,14 +66,20 @@ class Raster(mi.SamplingIntegrator):
         self.aa = values.pop("aa")
         #: None: raster.layer_limit of the scene (no ray is cut short)
         self.max_layers = values.pop("max_layers")
+        freeze = values.pop("freeze")
         self.options = raster.Options(**values).check()
+        if freeze:
+            raster.FrozenFrames.check(self.options)
+        #: the frame's recordings (None: every frame traced anew)
+        self.frozen = raster.FrozenFrames() if freeze else None
         self.shapes = None
 
     @collector_paused   # the whole frame: its vectorised calls trace every live BSDF
     def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
-        return raster.render(scene, sensor, self.aa, self.max_layers, self.options, self.shapes)
+        return raster.render(scene, sensor, self.aa, self.max_layers, self.options, self.shapes,
+                             self.frozen)
 
     @collector_paused
     def sample(self, scene, sampler, ray, medium=None, active=True):
@@ -85,7 +96,7 @@ class Raster(mi.SamplingIntegrator):
         layers = "auto" if self.max_layers is None else self.max_layers
         return (f"Raster[aa={self.aa}, max_layers={layers}, visibility={o.visibility}, "
                 f"shadows={o.shadows}, shadow_resolution={o.shadow_resolution}, "
-                f"area_samples={o.area_samples}]")
+                f"area_samples={o.area_samples}, freeze={self.frozen is not None}]")
 
 
 def register():

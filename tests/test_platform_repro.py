@@ -9,6 +9,21 @@ import pytest
 REPRO = Path(__file__).resolve().parents[1] / "scripts" / "repro"
 
 
+def outcome(script: str, args: list, header: str, crashes: bool, abort_text: str) -> list:
+    """Run ``scripts/repro/SCRIPT ARGS`` in a fresh process: its stdout starts with
+    ``header``; it aborts with ``abort_text`` on stderr (``crashes``) or exits 0.  Returns
+    its stdout lines."""
+    run = subprocess.run([sys.executable, str(REPRO / script), *args],
+                         capture_output=True, text=True, timeout=300)
+    assert run.stdout.startswith(header)
+    if crashes:
+        assert run.returncode < 0, (run.returncode, run.stdout, run.stderr[-2000:])
+        assert abort_text in run.stderr
+    else:
+        assert run.returncode == 0, run.stderr[-2000:]
+    return run.stdout.splitlines()
+
+
 def test_plugin_constructor_error_reaches_load_dict_as_text_in_a_runtime_error(variant):
     """A Python BSDF raising ValueError in its constructor: ``mi.load_dict`` raises a
     RuntimeError with nothing chained, whose text is Mitsuba's location, the Python
@@ -41,12 +56,19 @@ def test_collector_inside_a_trace_frees_a_dropped_instance(variant_llvm, mode, c
     method run with the collector paused; pausing it around the whole render protects, and
     an instance freed before or after its turn does no harm.  When Mitsuba/Dr.Jit fix it, the crashing
     modes exit 0 and this fails: the note and the workaround can go."""
-    run = subprocess.run([sys.executable, str(REPRO / "collector_trace.py"), mode, variant_llvm],
-                         capture_output=True, text=True, timeout=300)
-    assert run.stdout.startswith(f"mitsuba {__import__('mitsuba').__version__}, drjit ")
-    if crashes:
-        assert run.returncode < 0, (run.returncode, run.stdout, run.stderr[-2000:])
-        assert "pointer is not registered" in run.stderr
-    else:
-        assert run.returncode == 0, run.stderr[-2000:]
-        assert run.stdout.splitlines()[-1].startswith("ok, mean ")
+    lines = outcome("collector_trace.py", [mode, variant_llvm],
+                    f"mitsuba {__import__('mitsuba').__version__}, drjit ", crashes,
+                    "pointer is not registered")
+    assert crashes or lines[-1].startswith("ok, mean ")
+
+
+@pytest.mark.parametrize("mode, crashes", [("empty", True), ("width1", False)])
+def test_freeze_with_an_empty_array_input_aborts(mode, crashes):
+    """scripts/repro/freeze_empty_array.py (docs/platform.md): ``dr.freeze`` given an empty
+    array among its inputs aborts the process; a width-1 array records.  Why
+    ``lights.area_samples`` holds a width-1 null emitter for a scene without area lights
+    (``raster``'s ``freeze`` passes it to the recording).  When Dr.Jit fixes it, "empty"
+    exits 0 and this fails: the note can go."""
+    lines = outcome("freeze_empty_array.py", [mode], f"drjit {__import__('drjit').__version__}",
+                    crashes, "unknown variable")
+    assert crashes or lines[-1] == "ok [2, 3]"

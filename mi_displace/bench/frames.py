@@ -29,9 +29,13 @@ reference geometry, all in one process, at ``res`` x ``res`` pixels:
   of the misses); ``edit_profile``: the same of one more edit frame, at a value no frame had;
 * ``fixed_frame_s``: the fixed cost per frame, the median frame with the film at
   :data:`FIXED_RES` squared (:func:`fixed_cost`; ``fixed_kernel_share``, ``fixed_kernels``);
-* ``frozen_frame_s``, ``frozen_ratio``, ``frozen_identical``, ``frozen_error``: the whole
-  frame under ``dr.freeze`` on that film, against the plain frame, images compared bit for bit
-  also after a camera move and an edit (:func:`freeze_lever`);
+* ``frozen_orbit_frame_s``, ``frozen_fps``: the orbit again with the frame frozen (``raster``
+  with ``freeze`` on, :func:`frozen_orbit_frame`), median wall seconds and its rate; None
+  where the frame is not frozen;
+* ``frozen_frame_s``, ``frozen_ratio``, ``frozen_identical``, ``frozen_error``: the frame
+  frozen on that film (``raster`` with ``freeze`` on; the volume slicer's whole ``mi.render``
+  under ``dr.freeze``), against the plain frame, images compared bit for bit also after a
+  camera move and an edit (:func:`freeze_lever`);
 * ``peak_rss_mb``: the process's peak resident memory after the row
   (``resource.getrusage``), ``jit_peak_mb``: the peak of Dr.Jit's allocator for the variant's
   backend (``drjit.detail.malloc_watermark``); both only grow, so a row's own peak shows as a
@@ -53,6 +57,7 @@ import json as _json
 import resource
 import statistics
 import time
+import warnings
 from pathlib import Path
 from typing import NamedTuple
 
@@ -265,33 +270,69 @@ def fixed_cost(sensor, frame, count: int) -> dict:
             "fixed_kernels": profile["kernels"]}
 
 
-def freeze_lever(plain, frozen, call, changes, count: int) -> dict:
-    """``dr.freeze`` of the whole frame, measured on the film :func:`fixed_cost` left: the
-    frame ``plain()`` and the frozen function ``frozen`` (called as ``call(frozen)``), each
-    recorded or compiled once and then timed ``count`` times; their images compared bit for
-    bit now and after each of ``changes`` (a camera move, an edit): a value the recording
-    baked in (a C++ scalar traced as a literal) shows as a different image.
+def freeze_lever(plain, frozen, changes, count: int, refused=lambda: None) -> dict:
+    """The frame frozen, measured on the film :func:`fixed_cost` left: the frames
+    ``plain()`` and ``frozen()`` (the second recorded on its first call), each timed
+    ``count`` times after one untimed call; their images compared bit for bit now and after
+    each of ``changes`` (a camera move, an edit): a value the recording held as a constant
+    that the edit changed shows as a different image.
+
+    ``refused()`` says after the first frozen call why it drew unfrozen (``raster``'s
+    ``freeze`` falls back, :class:`mi_displace.render.raster.FrozenFrames`), or ``None``;
+    a ``RuntimeError`` from ``frozen()`` (``dr.freeze`` of a whole ``mi.render``) is a
+    refusal too.
 
     Returns ``frozen_frame_s`` (median), ``frozen_ratio`` (frozen / plain medians),
-    ``frozen_identical`` (all images equal) and ``frozen_error`` (why the recording failed:
-    the first line of Dr.Jit's reason; the other fields are then None)."""
+    ``frozen_identical`` (all images equal) and ``frozen_error`` (why it was not frozen:
+    the first line of the reason; the other fields are then None)."""
     def image(render):
         return np.array(render())
 
     try:
-        image(plain)
-        plain_s = statistics.median(_series(lambda _: image(plain), range(count)))
-        image(lambda: call(frozen))
-        frozen_s = statistics.median(_series(lambda _: image(lambda: call(frozen)), range(count)))
-        identical = np.array_equal(image(plain), image(lambda: call(frozen)))
-        for change in changes:
-            change()
-            identical &= np.array_equal(image(plain), image(lambda: call(frozen)))
-    except RuntimeError as error:   # Dr.Jit refused to record (a read-back or evaluation inside)
+        with warnings.catch_warnings():   # the refusal is this record's field, not a warning
+            warnings.simplefilter("ignore")
+            image(frozen)
+        why = refused()
+    except RuntimeError as error:   # dr.freeze refused to record (a read-back inside)
         why = str(error.__cause__ or error).strip().splitlines()[0]   # the cause names the reason
+    if why is not None:
         return {"frozen_frame_s": None, "frozen_ratio": None, "frozen_identical": None, "frozen_error": why}
+    image(plain)
+    plain_s = statistics.median(_series(lambda _: image(plain), range(count)))
+    frozen_s = statistics.median(_series(lambda _: image(frozen), range(count)))
+    identical = np.array_equal(image(plain), image(frozen))
+    for change in changes:
+        change()
+        identical &= np.array_equal(image(plain), image(frozen))
     return {"frozen_frame_s": frozen_s, "frozen_ratio": frozen_s / plain_s,
             "frozen_identical": bool(identical), "frozen_error": None}
+
+
+def frozen_orbit_frame(first, refused, move, views) -> float | None:
+    """The orbit again with the frame frozen (``first()`` records it, ``move(view)`` moves
+    the camera and draws): the median wall seconds, or ``None`` when it was not frozen
+    (``refused()``, or ``dr.freeze`` raised)."""
+    try:
+        with warnings.catch_warnings():   # the refusal is freeze_lever's field, not a warning
+            warnings.simplefilter("ignore")
+            first()
+    except RuntimeError:   # dr.freeze refused to record: freeze_lever reports why
+        return None
+    if refused() is not None:
+        return None
+    return statistics.median(_series(move, views))
+
+
+def frozen_frame(row: Row, scene, integrator):
+    """``(frame, refused)`` for :func:`freeze_lever`: for ``"raster"`` rows the same
+    ``raster`` with ``freeze`` on (what a user sets), else the whole ``mi.render`` under
+    ``dr.freeze``."""
+    if row.integrator == "raster":
+        frozen = mi.load_dict({"type": "raster", "aa": 1, "freeze": True})
+        return (lambda: mi.render(scene, integrator=frozen, spp=1),
+                lambda: frozen.frozen.refused.get(id(scene)))
+    whole = dr.freeze(lambda scene, integrator: mi.render(scene, integrator=integrator, spp=1))
+    return lambda: whole(scene, integrator), lambda: None
 
 
 def frame_integrator(row: Row, scene):
@@ -330,11 +371,11 @@ def measure(row: Row, sizes: Sizes) -> dict:
     still = _series(lambda _: frame(), range(sizes.orbit))
     sensor = mi.traverse(scene.sensors()[0])
 
-    def move(to_world):
+    def move(to_world, draw=frame):
         sensor["to_world"] = to_world
         sensor.update()
         fit_to_sensors(scene)
-        frame()
+        draw()
 
     angles = _spread(-ORBIT_DEG, ORBIT_DEG, sizes.orbit, rng)
     orbit = _series(move, _orbit(scene, angles))
@@ -355,11 +396,13 @@ def measure(row: Row, sizes: Sizes) -> dict:
     edit_times = _series(edit, factors)
     check()
     edit_profile = _profile(lambda: edit((factors[0] + factors[1]) / 2))   # a value new to this run
+    frozen_call, refused = frozen_frame(row, scene, integrator)
+    frozen_orbit = frozen_orbit_frame(lambda: dr.eval(frozen_call()), refused,
+                                      lambda to_world: move(to_world, lambda: dr.eval(frozen_call())),
+                                      _orbit(scene, angles))
     fixed = fixed_cost(sensor, frame, sizes.orbit)
-    frozen = freeze_lever(lambda: mi.render(scene, integrator=integrator, spp=1),
-                          dr.freeze(lambda scene, integrator: mi.render(scene, integrator=integrator, spp=1)),
-                          lambda frozen: frozen(scene, integrator),
-                          [lambda: move(unseen), lambda: edit(factors[0])], sizes.orbit)
+    frozen = freeze_lever(lambda: mi.render(scene, integrator=integrator, spp=1), frozen_call,
+                          [lambda: move(unseen), lambda: edit(factors[0])], sizes.orbit, refused)
     orbit_s = statistics.median(orbit)
     paper = max(row.paper.fps) if row.paper.fps else None
     record = {
@@ -376,6 +419,8 @@ def measure(row: Row, sizes: Sizes) -> dict:
         "fps_vs_paper": (1.0 / orbit_s) / paper if paper else None,
         **profile,
         "edit_profile": edit_profile,
+        "frozen_orbit_frame_s": frozen_orbit,
+        "frozen_fps": 1.0 / frozen_orbit if frozen_orbit else None,
         **fixed,
         **frozen,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
@@ -402,10 +447,16 @@ def run(sizes: Sizes = FULL) -> dict:
 
 
 def _frozen_cell(r: dict) -> str:
-    """The frozen / plain ratio of a row, "≠" after it when the images differed, or "refused"."""
+    """The frozen fixed cost of a row in ms and its ratio to the plain one, "≠" after it
+    when the images differed, or "not frozen"."""
     if r["frozen_ratio"] is None:
-        return "refused"
-    return f"{r['frozen_ratio']:.3f}" + ("" if r["frozen_identical"] else " ≠")
+        return "not frozen"
+    return (f"{1e3 * r['frozen_frame_s']:.1f} ({r['frozen_ratio']:.2f}×)"
+            + ("" if r["frozen_identical"] else " ≠"))
+
+
+def _ms(seconds) -> str:
+    return "–" if seconds is None else f"{1e3 * seconds:.0f}"
 
 
 def markdown(record: dict) -> str:
@@ -415,8 +466,9 @@ def markdown(record: dict) -> str:
 
     lines = ["| row | load s | first frame s | still frame ms | orbit frame ms | edit frame ms | fps "
              "| paper fps | × paper | kernels % | launches (compiled) | compile ms orbit / edit "
-             f"| fixed ms ({FIXED_RES}²) | frozen / plain | peak RSS MB | Dr.Jit peak MB |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             f"| frozen orbit ms | fixed ms ({FIXED_RES}²) | frozen fixed ms (× plain) | peak RSS MB "
+             "| Dr.Jit peak MB |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in record["rows"]:
         paper = "–" if r["paper_fps"] is None else "–".join(f"{f:g}" for f in dict.fromkeys(r["paper_fps"]))
         lines.append(
@@ -424,7 +476,8 @@ def markdown(record: dict) -> str:
             f"| {1e3 * r['orbit_frame_s']:.0f} | {1e3 * r['edit_frame_s']:.0f} | {r['fps']:.1f} | {paper} "
             f"| {cell(r['fps_vs_paper'], '.2f')} | {100 * r['kernel_share']:.0f} "
             f"| {r['kernels']} ({r['cache_misses']}) | {r['compile_ms']:.0f} / {r['edit_profile']['compile_ms']:.0f} "
-            f"| {1e3 * r['fixed_frame_s']:.1f} | {_frozen_cell(r)} | {r['peak_rss_mb']:.0f} "
+            f"| {_ms(r['frozen_orbit_frame_s'])} | {1e3 * r['fixed_frame_s']:.1f} | {_frozen_cell(r)} "
+            f"| {r['peak_rss_mb']:.0f} "
             f"| {r['jit_peak_mb']:.0f} |")
     return "\n".join(lines)
 
@@ -441,20 +494,24 @@ DOCS = Path(__file__).resolve().parents[2] / "docs"
 
 def guide_table(record: dict, names) -> str:
     """The frames table of one guide: ``names``' rows of ``record`` (the orbit frame, the
-    fixed cost, the paper's rate and the ratio to it), the command and the machine's load."""
+    fixed cost, the paper's rate and the ratio to it, both frames with ``freeze``), the
+    command and the machine's load."""
     rows = {r["name"]: r for r in record["rows"]}
     lines = [f"`mi-displace bench frames --out docs/figures` ([frames](frames.md), "
              f"`figures/frames_bench.json`): {record['resolution']}², one sample per pixel, "
              f"`{record['variant']}`, {record['cpu_count']} cores, load average "
              f"{record['load_average']:.1f} at the end of the run.", "",
-             "| row | orbit frame ms | fps | paper fps | × paper | fixed ms (8²) | load s |",
-             "|---|---:|---:|---:|---:|---:|---:|"]
+             "| row | orbit frame ms | fps | paper fps | × paper | fixed ms (8²) | with `freeze`: "
+             "orbit frame ms / fixed ms | load s |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for name in names:
         r = rows[name]
         paper = "–" if r["paper_fps"] is None else "–".join(f"{f:g}" for f in dict.fromkeys(r["paper_fps"]))
         ratio = "–" if r["fps_vs_paper"] is None else f"{r['fps_vs_paper']:.2f}"
+        frozen = ("not frozen" if r["frozen_frame_s"] is None
+                  else f"{_ms(r['frozen_orbit_frame_s'])} / {1e3 * r['frozen_frame_s']:.1f}")
         lines.append(f"| `{name}` | {1e3 * r['orbit_frame_s']:.0f} | {r['fps']:.1f} | {paper} | {ratio} "
-                     f"| {1e3 * r['fixed_frame_s']:.1f} | {r['load_s']:.2f} |")
+                     f"| {1e3 * r['fixed_frame_s']:.1f} | {frozen} | {r['load_s']:.2f} |")
     return "\n".join(lines)
 
 

@@ -114,8 +114,8 @@ def area_samples(scene: mi.Scene, n: int) -> AreaSamples:
             parts.append((_widen(ps.p, mi.Point3f, n), _widen(ps.n, mi.Normal3f, n),
                           _widen(ps.uv, mi.Point2f, n), _widen(ps.pdf, mi.Float, n)))
             index.append(dr.full(mi.UInt32, i, n))
-    if not parts:
-        return AreaSamples(dr.zeros(mi.PositionSample3f, 1), mi.EmitterPtr(), 0)
+    if not parts:   # width 1, not empty: an empty array aborts dr.freeze (docs/platform.md)
+        return AreaSamples(dr.zeros(mi.PositionSample3f, 1), dr.zeros(mi.EmitterPtr, 1), 0)
     ps = dr.zeros(mi.PositionSample3f, n * len(parts))
     ps.p, ps.n, ps.uv, ps.pdf = (dr.concat([p[j] for p in parts]) for j in range(4))
     emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), dr.concat(index))

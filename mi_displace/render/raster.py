@@ -514,8 +514,110 @@ def zbuffer_hit(sensor: mi.Sensor, geom: zbuffer.Geometry, ray: mi.Ray3f, aa: in
     return resolve(everything, keys, ray)[0], dr.width(pending)
 
 
+def _shaded(scene: mi.Scene, sensor: mi.Sensor, aa: int, limit: int, options: Options,
+            light_data: lights.Lights, geom) -> tuple[mi.TensorXf, mi.Bool | int]:
+    """The frame after the lights are prepared: pixel rays, visibility, shading, box filter.
+
+    Returns:
+        The (height, width, 3) image and the samples ``limit`` cut short (a Bool per sample
+        when ray-traced, a count by z-buffer).
+    """
+    ray, weight, w, h = pixel_rays(sensor, aa)
+    active = mi.Bool(True)
+    if options.visibility == "raytrace":
+        si, ray, cut = first_opaque_hit(scene, ray, limit, active)
+    else:
+        si, cut = zbuffer_hit(sensor, geom, ray, aa, limit)
+    L = shade_hit(scene, si, ray, active, shadow_test_of(scene, geom, options),
+                  light_data, area_shadow_test_of(scene, geom, options, light_data.area))
+    L *= weight
+    dr.eval(L, cut)   # one kernel: the alpha-test loop's outputs together
+    n = aa * aa
+    if n > 1:
+        # the shading evaluated once (above): each channel's block_reduce would otherwise
+        # launch its own copy of the whole shading kernel (3x the work for costly BSDFs)
+        L = mi.Color3f([dr.block_reduce(dr.ReduceOp.Add, c, n) / n for c in L])
+    return mi.TensorXf(dr.ravel(L), (h, w, 3)), cut
+
+
+def scalar_state(*nodes) -> tuple:
+    """What a recorded frame would hold as constants: every ``mi.traverse`` parameter of
+    ``nodes`` that is not a Dr.Jit array (a C++ scalar such as ``bumpmap``'s ``scale``, a
+    film size, a plugin's scalar parameter), as ``(key, repr(value))`` pairs.  The Dr.Jit
+    arrays (positions, colours, the sensor's ``to_world``) are inputs a frozen frame reads
+    anew; a change of this tuple makes :class:`FrozenFrames` record the frame again."""
+    state = []
+    for node in nodes:   # the scene and its sensor
+        params = mi.traverse(node)
+        for key in params.keys():   # a scene's parameters, not elements
+            value = params[key]
+            if not dr.is_jit_v(getattr(value, "matrix", value)):   # transforms hold .matrix
+                state.append((key, repr(value)))
+    return tuple(state)
+
+
+class FrozenFrames:
+    """``dr.freeze`` of :func:`render`'s ray-traced frame (``raster``'s ``freeze``): the
+    frame's kernels are recorded once per scene configuration and replayed, so a frame
+    costs its kernels plus the lights' preparation, not Python tracing and launches.
+
+    The recording is keyed on the frame's Dr.Jit inputs (traversed through the scene and
+    the sensor: geometry, textures, the camera), on ``aa``, the layer limit and the options,
+    and on :func:`scalar_state` (the values a kernel holds as constants): an edit through
+    ``mi.traverse`` of any of them records the frame again.  Frames of scenes whose shapes
+    draw themselves (``raster_begin``: the slicing shapes rasterise with read-backs) and
+    scenes whose recording Dr.Jit refuses (a BSDF that reads back or evaluates inside its
+    query) are drawn unfrozen, with one warning per scene naming the reason.
+    """
+
+    #: Recordings kept (least recently used dropped): each holds a frame's kernels.
+    LIMIT = 8
+
+    def __init__(self):
+        self.function = dr.freeze(self._frame, limit=self.LIMIT, warn_after=2**31 - 1)
+        self.refused: dict[int, str] = {}   # id(scene) -> why its frames are not frozen
+
+    @staticmethod
+    def _frame(scene, sensor, aa, limit, options, light_data, state):
+        image, cut = _shaded(scene, sensor, aa, limit, options, light_data, None)
+        return image, dr.count(cut)
+
+    @staticmethod
+    def check(options: Options) -> Options:
+        """``options`` if a frame under them can be frozen; else ValueError (one line)."""
+        if options.visibility != "raytrace" or options.shadows == "map":
+            raise ValueError("raster: 'freeze' needs visibility='raytrace' and shadows='ray' "
+                             "or 'none' (the z-buffer and shadow maps size their passes from "
+                             "what a frame finds)")
+        return options
+
+    def __call__(self, scene, sensor, aa, limit, options, light_data, drawn):
+        """The frame, replayed (or recorded) as ``(image, samples cut short)``; ``None``
+        when it cannot be frozen (the reason remembered for ``scene``, warned about once)."""
+        if id(scene) not in self.refused and drawn:
+            shape = drawn[0].id() or type(drawn[0]).__name__
+            self._refuse(scene, f"shape {shape!r} draws itself before the frame "
+                                "(raster_begin) and reads back what it drew")
+        if id(scene) in self.refused:
+            return None
+        try:
+            image, cut = self.function(scene, sensor, aa, limit, options, light_data,
+                                       scalar_state(scene, sensor))
+        except RuntimeError as error:   # the recording failed: nothing was replayed
+            self._refuse(scene, "Dr.Jit refused to record it: "
+                         + str(error.__cause__ or error).strip().splitlines()[0])
+            return None
+        return image, int(cut[0])
+
+    def _refuse(self, scene, why: str) -> None:
+        self.refused[id(scene)] = why
+        warnings.warn(f"raster: freeze: this scene's frames are drawn unfrozen ({why})",
+                      stacklevel=4)
+
+
 def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int | None = None,
-           options: Options | None = None, shapes=None) -> mi.TensorXf:
+           options: Options | None = None, shapes=None,
+           frozen: FrozenFrames | None = None) -> mi.TensorXf:
     """Render ``scene`` GPU-style; returns a (height, width, 3) linear RGB tensor.
 
     The aa x aa sub-samples of a pixel are averaged with equal weights (box filter);
@@ -529,11 +631,15 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int | No
         shapes: the meshes to draw instead of ``scene.shapes()`` — with
             ``visibility="zbuffer"`` and ``shadows="map"|"none"`` the scene then needs no
             shapes at all, so Mitsuba builds no acceleration structure over them.
+        frozen: replay the frame's recorded kernels (:class:`FrozenFrames`); needs
+            ``visibility="raytrace"`` and ``shadows`` ``"ray"`` or ``"none"`` (hence no
+            ``shapes``).
 
     Raises:
         ValueError: bad options, an emitter raster cannot draw, a film whose sample
-            buffers exceed the memory budget (before anything is allocated), or ``shapes``
-            given to a method that traces rays through the scene.
+            buffers exceed the memory budget (before anything is allocated), ``shapes``
+            given to a method that traces rays through the scene, or ``frozen`` with
+            other options (:meth:`FrozenFrames.check`).
     """
     options = (options or Options()).check()
     lights.check(scene)
@@ -543,34 +649,28 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int | No
     if shapes is not None and traces:
         raise ValueError("raster: explicit 'shapes' need visibility='zbuffer' and "
                          "shadows='map' or 'none' (rays are traced through the scene's shapes)")
+    if frozen is not None:
+        FrozenFrames.check(options)
     light_data = lights.prepare(scene, options.area_samples)
     geom = None
     every = list(scene.shapes() if shapes is None else shapes)
     if options.visibility == "zbuffer" or options.shadows == "map":
         geom = zbuffer.gather_geometry(every)
     limit = layer_limit(every, scene if shapes is None else None) if max_layers is None else max_layers
-    ray, weight, w, h = pixel_rays(sensor, aa)
-    active = mi.Bool(True)
     drawn = [s for s in every if hasattr(s, "raster_begin")]
-    try:
-        for shape in drawn:   # a handful of shapes
-            shape.raster_begin(sensor, aa)
-        if options.visibility == "raytrace":
-            si, ray, cut = first_opaque_hit(scene, ray, limit, active)
-        else:
-            si, cut = zbuffer_hit(sensor, geom, ray, aa, limit)
-        L = shade_hit(scene, si, ray, active, shadow_test_of(scene, geom, options),
-                      light_data, area_shadow_test_of(scene, geom, options, light_data.area))
-        L *= weight
-        dr.eval(L, cut)   # one kernel: the alpha-test loop's outputs together
-    finally:
-        for shape in drawn:
-            shape.raster_end()
-    warn_exhausted(int(dr.count(cut)[0]) if isinstance(cut, mi.Bool) else cut, dr.width(L), limit)
-    n = aa * aa
-    if n > 1:
-        # evaluate the shading once: each channel's block_reduce would otherwise launch
-        # its own copy of the whole shading kernel (3x the work for costly BSDFs)
-        dr.eval(L)
-        L = mi.Color3f([dr.block_reduce(dr.ReduceOp.Add, c, n) / n for c in L])
-    return mi.TensorXf(dr.ravel(L), (h, w, 3))
+    result = None
+    if frozen is not None:
+        result = frozen(scene, sensor, aa, limit, options, light_data, drawn)
+    if result is None:
+        try:
+            for shape in drawn:   # a handful of shapes
+                shape.raster_begin(sensor, aa)
+            result = _shaded(scene, sensor, aa, limit, options, light_data, geom)
+        finally:
+            for shape in drawn:
+                shape.raster_end()
+    image, cut = result
+    warn_exhausted(int(dr.count(cut)[0]) if isinstance(cut, mi.Bool) else cut,
+                   int(w) * int(h) * aa * aa, limit)
+    return image
+

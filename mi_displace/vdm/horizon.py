@@ -13,6 +13,7 @@ mapping).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
@@ -54,8 +55,12 @@ def horizon_table(heights: np.ndarray, D: float, n_azimuth: int, max_distance: f
     return np.asarray(best, np.float32).reshape(n_azimuth, ry, rx)
 
 
+@dataclass(init=False, eq=False)   # its fields a PyTree, so a frozen frame finds the texture
 class HorizonLookup:
     """The horizon table as a wrapped trilinear texture over (phi, y, x)."""
+    n_azimuth: int
+    tex: mi.Texture3f
+    nbytes: int
 
     def __init__(self, table: np.ndarray):
         self.n_azimuth = table.shape[0]

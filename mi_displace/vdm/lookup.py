@@ -13,6 +13,7 @@ phi_k = 2 pi k / n_phi, curvatures c_lo ... c_hi inclusive).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import drjit as dr
 import mitsuba as mi
@@ -44,8 +45,20 @@ def cached_lookup(data: VDMData, svd_terms: int, mvm_terms: int) -> "VDMLookup":
     return hit
 
 
+@dataclass(init=False, eq=False)   # its fields a PyTree, so a frozen frame finds the textures
 class VDMLookup:
     """Textures of one built table at the given term counts (svd_terms, mvm_terms)."""
+    weights: mi.Texture3f
+    e_vdm: mi.Texture2f
+    e_mvm: mi.Texture1f
+    res: int
+    n_phi: int
+    n_theta: int
+    n_c: int
+    c_lo: float
+    c_hi: float
+    theta_max: float
+    nbytes: int
 
     def __init__(self, data: VDMData, svd_terms: int, mvm_terms: int):
         s = data.spec

@@ -85,6 +85,7 @@ def view_curvature(si: mi.SurfaceInteraction3f, frame: TileFrame, w: mi.Vector3f
     return s * s * dr.select(norm2 > 1e-6, num / dr.maximum(norm2, 1e-30), mean)
 
 
+@dataclass(init=False, eq=False)   # its fields a PyTree, so a frozen frame finds the table's textures
 class VDMSteps:
     """The per-pixel algorithm over one table.
 
@@ -107,6 +108,19 @@ class VDMSteps:
         shadow_verify: points of the check of :meth:`_occluded` (0: the paper's test alone;
             then a slack of 1 and a bias of 1 texel are needed against false shadows).
     """
+    lookup: VDMLookup
+    depth: float
+    tile_size: float
+    tiling: tuple
+    height: TiledHeight
+    use_curvature: bool
+    shadows: bool
+    eps: float
+    rel: float
+    tan_max: float
+    refine_steps: int
+    refine_window: float
+    shadow_verify: int
 
     def __init__(self, lookup: VDMLookup, height: mi.Texture, depth: float, tile_size: float,
                  tiling, use_curvature: bool, shadows: bool = True, shadow_bias: float = 0.0,

@@ -85,7 +85,8 @@ def _scaled(x):
 def test_freeze_lever_times_both_and_sees_a_baked_value(variant_llvm, monkeypatch):
     """``freeze_lever``: frozen and plain frames timed, images equal when only the frozen
     function's inputs change; a value baked into the recording (as Mitsuba's ``bumpmap``
-    scale) shows as unequal images; a refused recording gives Dr.Jit's reason."""
+    scale) shows as unequal images; a refused recording gives Dr.Jit's reason, a frame
+    drawn unfrozen (``refused()``) its own."""
     import drjit as dr
     import mitsuba as mi
 
@@ -96,8 +97,10 @@ def test_freeze_lever_times_both_and_sees_a_baked_value(variant_llvm, monkeypatc
     def move():
         state["x"] = dr.arange(mi.Float, 1000) * 0.5
 
-    def lever(changes, frozen=_scaled):
-        return freeze_lever(lambda: _scaled(state["x"]), dr.freeze(frozen), lambda f: f(state["x"]), changes, 3)
+    def lever(changes, frozen=_scaled, refused=lambda: None):
+        recorded = dr.freeze(frozen)
+        return freeze_lever(lambda: _scaled(state["x"]), lambda: recorded(state["x"]), changes, 3,
+                            refused)
 
     inputs = lever([move])
     assert inputs["frozen_identical"] is True and inputs["frozen_error"] is None
@@ -108,6 +111,8 @@ def test_freeze_lever_times_both_and_sees_a_baked_value(variant_llvm, monkeypatc
     refused = lever([], frozen=lambda x: x * dr.sum(x)[0])   # a read-back inside
     assert refused["frozen_frame_s"] is refused["frozen_ratio"] is refused["frozen_identical"] is None
     assert "frozen function" in refused["frozen_error"]
+    unfrozen = lever([], refused=lambda: "drawn unfrozen")
+    assert unfrozen["frozen_error"] == "drawn unfrozen" and unfrozen["frozen_ratio"] is None
 
 
 def test_fixed_cost_renders_a_tiny_film(variant_llvm):

@@ -1,0 +1,122 @@
+"""`raster`'s ``freeze``: the frame's kernels recorded once and replayed
+(:class:`mi_displace.render.raster.FrozenFrames`).  A frozen frame must be the plain frame bit
+for bit, after a camera move and after edits of Dr.Jit values and of C++ scalars alike;
+scenes Dr.Jit cannot record are drawn unfrozen, once warned about, never black or stale."""
+import warnings
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mi_displace.core.resources import scene_path
+from mi_displace.render.scene import load
+
+VDM_QUICK = {"vdm_res": 16, "vdm_phi": 8, "vdm_theta": 4, "vdm_curvatures": 4}
+
+
+def pair(**options):
+    """The same ``raster`` twice: plain and frozen."""
+    return (mi.load_dict({"type": "raster", **options}),
+            mi.load_dict({"type": "raster", "freeze": True, **options}))
+
+
+def image(scene, integrator):
+    img = np.array(mi.render(scene, integrator=integrator))
+    assert np.isfinite(img).all() and img.max() > 0
+    return img
+
+
+def same(scene, plain, frozen):
+    """The frozen frame (twice: recorded, then replayed) against the plain one, bit for bit."""
+    want = image(scene, plain)
+    for _ in range(2):
+        np.testing.assert_array_equal(image(scene, frozen), want)
+    return want
+
+
+def orbit(scene, degrees):
+    params = mi.traverse(scene.sensors()[0])
+    params["to_world"] = mi.Transform4f().rotate([0, 0, 1], degrees) @ params["to_world"]
+    params.update()
+
+
+@pytest.mark.parametrize("mode, scalar", [("bump", "bsdf.scale"), ("horizon", None),
+                                          ("approximation", None)])
+def test_frozen_frames_are_the_plain_frames_through_moves_and_edits(variant, mode, scalar):
+    """The VDM torus in the modes with different holders of their tables (the bump map's
+    C++ ``scale``, horizon's and VDM's textures in dataclasses): recorded, replayed, after a
+    camera move (a Dr.Jit input), a colour edit (a Dr.Jit input) and, for bump, an edit of a
+    C++ scalar that a recording would hold as a constant (recorded again)."""
+    scene, _ = load(scene_path("vdm_torus.xml"), mode=mode, integrator="raster", res=48,
+                    **(VDM_QUICK if mode == "approximation" else {}))
+    plain, frozen = pair()
+    first = same(scene, plain, frozen)
+    orbit(scene, 9.0)
+    moved = same(scene, plain, frozen)
+    assert np.abs(moved - first).max() > 0.01
+    params = mi.traverse(scene)
+    key = next(k for k in params.keys() if k.endswith(scalar or "vdm_material.reflectance.value"))
+    params[key] = type(params[key])(params[key] * 0.5)
+    params.update()
+    edited = same(scene, plain, frozen)
+    assert np.abs(edited - moved).max() > 0.01
+    assert frozen.frozen.refused == {}
+
+
+def test_area_lights_environment_and_aa_frozen(variant):
+    """Light data (area-light points, an environment's SH) prepared outside the recording
+    and passed in; a 2 x 2 pattern's box filter inside it; a light moved between frames."""
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 35, "to_world": mi.ScalarTransform4f().look_at(
+            origin=[0, -5, 2], target=[0, 0, 0], up=[0, 0, 1]),
+            "film": {"type": "hdrfilm", "width": 40, "height": 32}},
+        "ball": {"type": "sphere", "bsdf": {"type": "diffuse"}},
+        "floor": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([0, 0, -1])
+                  @ mi.ScalarTransform4f().scale(4)},
+        "lamp": {"type": "rectangle", "to_world": mi.ScalarTransform4f().translate([1, -1, 3])
+                 @ mi.ScalarTransform4f().scale(0.5) @ mi.ScalarTransform4f().rotate([1, 0, 0], 180),
+                 "emitter": {"type": "area", "radiance": {"type": "rgb", "value": 8}}},
+        "sky": {"type": "constant", "radiance": {"type": "rgb", "value": 0.2}},
+    })
+    plain, frozen = pair(aa=2, area_samples=4)
+    first = same(scene, plain, frozen)
+    params = mi.traverse(scene)
+    params["lamp.to_world"] = mi.Transform4f().translate([0.6, 0, 0]) @ params["lamp.to_world"]
+    params.update()
+    assert np.abs(same(scene, plain, frozen) - first).max() > 0.01
+
+
+def test_a_scene_dr_jit_will_not_record_is_drawn_unfrozen_with_one_warning(variant):
+    """The depth object's BSDF schedules an evaluation inside its query, which a recording
+    refuses: the frame is drawn unfrozen (the plain image), the reason warned once."""
+    scene, _ = load(scene_path("slicing_cup_depth.xml"), mode="approximation",
+                    integrator="raster", res=32, slices=16)
+    plain, frozen = pair()
+    want = image(scene, plain)
+    with pytest.warns(UserWarning, match="raster: freeze: this scene's frames are drawn unfrozen "
+                                         r"\(Dr.Jit refused to record it: "):
+        np.testing.assert_array_equal(image(scene, frozen), want)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")   # once per scene
+        np.testing.assert_array_equal(image(scene, frozen), want)
+
+
+def test_a_shape_that_draws_itself_is_drawn_unfrozen(variant):
+    """Slicing shapes rasterise their slices before the frame (``raster_begin``) and read
+    back what they drew: not recorded, drawn plain, the shape named."""
+    scene, _ = load(scene_path("slicing_donut.xml"), mode="approximation", integrator="raster",
+                    res=32, coarse=16, direction="screen")
+    plain, frozen = pair()
+    want = image(scene, plain)
+    with pytest.warns(UserWarning, match=r"draws itself before the frame \(raster_begin\)"):
+        np.testing.assert_array_equal(image(scene, frozen), want)
+
+
+@pytest.mark.parametrize("option", [{"visibility": "zbuffer"}, {"shadows": "map"}])
+def test_freeze_refuses_passes_sized_by_what_a_frame_finds(variant, option):
+    """The z-buffer and shadow maps read back sizes during a frame: refused at load,
+    naming the parameter, before any kernel runs."""
+    with pytest.raises(Exception, match="raster: 'freeze' needs visibility='raytrace' and "
+                                        "shadows='ray' or 'none'"):
+        mi.load_dict({"type": "raster", "freeze": True, **option})
