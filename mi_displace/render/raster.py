@@ -565,9 +565,10 @@ class FrozenFrames:
     the sensor: geometry, textures, the camera), on ``aa``, the layer limit and the options,
     and on :func:`scalar_state` (the values a kernel holds as constants): an edit through
     ``mi.traverse`` of any of them records the frame again.  Frames of scenes whose shapes
-    draw themselves (``raster_begin``: the slicing shapes rasterise with read-backs) and
-    scenes whose recording Dr.Jit refuses (a BSDF that reads back or evaluates inside its
-    query) are drawn unfrozen, with one warning per scene naming the reason.
+    draw themselves (``raster_begin``: the slicing shapes rasterise with read-backs), whose
+    BSDFs say they cannot be recorded (``FREEZABLE = False``: the slicing and depth-object
+    BSDFs) and whose recording Dr.Jit refuses (a BSDF that reads back inside its query) are
+    drawn unfrozen, with one warning per scene naming the reason.
     """
 
     #: Recordings kept (least recently used dropped): each holds a frame's kernels.
@@ -594,10 +595,10 @@ class FrozenFrames:
     def __call__(self, scene, sensor, aa, limit, options, light_data, drawn):
         """The frame, replayed (or recorded) as ``(image, samples cut short)``; ``None``
         when it cannot be frozen (the reason remembered for ``scene``, warned about once)."""
-        if id(scene) not in self.refused and drawn:
-            shape = drawn[0].id() or type(drawn[0]).__name__
-            self._refuse(scene, f"shape {shape!r} draws itself before the frame "
-                                "(raster_begin) and reads back what it drew")
+        if id(scene) not in self.refused:
+            why = self.unrecordable(scene, drawn)
+            if why is not None:
+                self._refuse(scene, why)
         if id(scene) in self.refused:
             return None
         try:
@@ -608,6 +609,22 @@ class FrozenFrames:
                          + str(error.__cause__ or error).strip().splitlines()[0])
             return None
         return image, int(cut[0])
+
+    @staticmethod
+    def unrecordable(scene, drawn) -> str | None:
+        """Why ``scene``'s frame must not be recorded, known before recording: a shape of
+        ``drawn`` (it draws itself before the frame and reads back what it drew), or a BSDF
+        whose class says ``FREEZABLE = False`` (its state is not traversable: a recording
+        over it may abort the process rather than raise).  ``None`` otherwise."""
+        if drawn:
+            return (f"shape {drawn[0].id() or type(drawn[0]).__name__!r} draws itself before "
+                    "the frame (raster_begin) and reads back what it drew")
+        for shape in scene.shapes():   # a handful of shapes
+            bsdf = shape.bsdf()
+            if not getattr(bsdf, "FREEZABLE", True):
+                return (f"BSDF {bsdf.id() or type(bsdf).__name__!r} is not recordable "
+                        "(FREEZABLE = False)")
+        return None
 
     def _refuse(self, scene, why: str) -> None:
         self.refused[id(scene)] = why

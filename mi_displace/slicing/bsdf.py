@@ -25,6 +25,10 @@ class SlicingBSDF(MesostructureBSDF):
 
     PLUGIN = "slicing"
     HAS_SILHOUETTE = True
+    #: ``raster``'s ``freeze`` cannot record it (FrozenFrames): the model (a SlicedVolume,
+    #: a DepthObject) keeps its slices and images outside what a recording traverses, and a
+    #: first frame recorded over them aborts the process in Dr.Jit 1.5.0 (enqueue_host_func)
+    FREEZABLE = False
 
     def __init__(self, props: mi.Properties, model):
         super().__init__(props, read_shared(props, self.PLUGIN))

@@ -87,19 +87,56 @@ def test_area_lights_environment_and_aa_frozen(variant):
     assert np.abs(same(scene, plain, frozen) - first).max() > 0.01
 
 
-def test_a_scene_dr_jit_will_not_record_is_drawn_unfrozen_with_one_warning(variant):
-    """The depth object's BSDF schedules an evaluation inside its query, which a recording
-    refuses: the frame is drawn unfrozen (the plain image), the reason warned once."""
+def test_a_bsdf_that_cannot_be_recorded_is_drawn_unfrozen_with_one_warning(variant):
+    """The depth object's BSDF keeps its images outside what a recording traverses (a
+    first frame recorded over it aborts the process): refused before recording — also as
+    the scene's first frame — drawn plain, the reason warned once."""
     scene, _ = load(scene_path("slicing_cup_depth.xml"), mode="approximation",
                     integrator="raster", res=32, slices=16)
     plain, frozen = pair()
-    want = image(scene, plain)
     with pytest.warns(UserWarning, match="raster: freeze: this scene's frames are drawn unfrozen "
-                                         r"\(Dr.Jit refused to record it: "):
-        np.testing.assert_array_equal(image(scene, frozen), want)
+                                         r"\(BSDF .* is not recordable"):
+        first = image(scene, frozen)
+    np.testing.assert_array_equal(first, image(scene, plain))
     with warnings.catch_warnings():
         warnings.simplefilter("error")   # once per scene
-        np.testing.assert_array_equal(image(scene, frozen), want)
+        np.testing.assert_array_equal(image(scene, frozen), first)
+
+
+def test_a_recording_dr_jit_refuses_is_drawn_unfrozen(variant):
+    """A BSDF whose array sits in a plain Python object (not traversed): Dr.Jit refuses the
+    recording with an exception (the array was made before it and is no input); the frame
+    is drawn plain, the reason warned."""
+    import drjit as dr
+
+    class Holder:   # not a PyTree: a recording does not see its array
+        def __init__(self):
+            self.albedo = dr.opaque(mi.Float, 0.25, 4)
+
+    class Hidden(mi.BSDF):
+        def __init__(self, props):
+            super().__init__(props)
+            self.holder = Holder()
+            self.m_components, self.m_flags = [mi.BSDFFlags.DiffuseReflection], mi.BSDFFlags.DiffuseReflection
+
+        def eval(self, ctx, si, wo, active=True):
+            value = dr.gather(mi.Float, self.holder.albedo, dr.zeros(mi.UInt32, dr.width(si.t)), active)
+            return mi.Color3f(value * dr.maximum(mi.Frame3f.cos_theta(wo), 0.0))
+
+        def eval_null_transmission(self, si, active=True):
+            return mi.Color3f(0.0)
+
+        def eval_diffuse_reflectance(self, si, active=True):
+            return mi.Color3f(0.25)
+
+    mi.register_bsdf("test_hidden_array", Hidden)
+    scene = mi.load_dict({"type": "scene", "ball": {"type": "sphere", "bsdf": {"type": "test_hidden_array"}},
+                          "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 16, "height": 16},
+                                     "to_world": mi.ScalarTransform4f().translate([0, 0, -4])},
+                          "sun": {"type": "directional", "direction": [0, 0, 1]}})
+    plain, frozen = pair()
+    with pytest.warns(UserWarning, match=r"\(Dr.Jit refused to record it: "):
+        np.testing.assert_array_equal(image(scene, frozen), image(scene, plain))
 
 
 def test_a_shape_that_draws_itself_is_drawn_unfrozen(variant):
