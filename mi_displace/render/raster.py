@@ -566,9 +566,10 @@ class FrozenFrames:
     and on :func:`scalar_state` (the values a kernel holds as constants): an edit through
     ``mi.traverse`` of any of them records the frame again.  Frames of scenes whose shapes
     draw themselves (``raster_begin``: the slicing shapes rasterise with read-backs), whose
-    BSDFs say they cannot be recorded (``FREEZABLE = False``: the slicing and depth-object
-    BSDFs) and whose recording Dr.Jit refuses (a BSDF that reads back inside its query) are
-    drawn unfrozen, with one warning per scene naming the reason.
+    BSDFs say they cannot be recorded (a class attribute ``FREEZABLE = False``, for a user's
+    plugin whose state Dr.Jit cannot traverse) and whose recording Dr.Jit refuses (an array
+    a recording does not find among its inputs) are drawn unfrozen, with one warning per
+    scene naming the reason.
     """
 
     #: Recordings kept (least recently used dropped): each holds a frame's kernels.

@@ -17,6 +17,17 @@ from mi_displace.vdm.frame import shading_interaction
 from mi_displace.vdm.mesostructure import MesostructureBSDF, read_shared
 
 
+class _Prepared:
+    """The last interaction's walk (:meth:`SlicingBSDF._prepare`): its variables' indices,
+    the variables (kept alive, so the indices are not reused) and the result.  A plain
+    object, not a PyTree, on purpose: a frozen frame (``raster``'s ``freeze``) traverses the
+    BSDF's attributes as its inputs, and the symbolic variables of an earlier trace are no
+    input (Dr.Jit refused: "jit_var_schedule(): not permitted")."""
+
+    def __init__(self):
+        self.key, self.alive, self.result = None, None, None
+
+
 class SlicingBSDF(MesostructureBSDF):
     """The α-tested slices of a :class:`SlicedVolume` seen through the volume's walls.
 
@@ -25,16 +36,12 @@ class SlicingBSDF(MesostructureBSDF):
 
     PLUGIN = "slicing"
     HAS_SILHOUETTE = True
-    #: ``raster``'s ``freeze`` cannot record it (FrozenFrames): the model (a SlicedVolume,
-    #: a DepthObject) keeps its slices and images outside what a recording traverses, and a
-    #: first frame recorded over them aborts the process in Dr.Jit 1.5.0 (enqueue_host_func)
-    FREEZABLE = False
 
     def __init__(self, props: mi.Properties, model):
         super().__init__(props, read_shared(props, self.PLUGIN))
         self.model = model   # a SlicedVolume (or a DepthObject in the subclass)
         self.self_shadows = bool(props.get("self_shadows", True))
-        self._cache = None
+        self._cache = _Prepared()
 
     def _facing(self, w):
         # the proxy is the volume's boundary: the fragment's own normal decides (nested BSDF)
@@ -49,10 +56,10 @@ class SlicingBSDF(MesostructureBSDF):
         # dispatch (the raster integrator's shading asks eval and eval_diffuse_reflectance so,
         # raster.shade_hit).
         key = (si.t.index, si.p.x.index, si.wi.x.index)
-        if self._cache is not None and self._cache[0] == key:
-            return self._cache[2]
+        if self._cache.key == key:
+            return self._cache.result
         result = self._walk(si, si.is_valid())
-        self._cache = (key, (si.t, si.p, si.wi), result)
+        self._cache.key, self._cache.alive, self._cache.result = key, (si.t, si.p, si.wi), result
         return result
 
     def _walk(self, si, active):

@@ -274,6 +274,7 @@ def _texture(images: np.ndarray, nearest: bool) -> list[mi.Texture2f]:
     return out
 
 
+@dataclass(init=False, eq=False)   # the fields a PyTree: a frozen raster frame finds the textures
 class DepthObject:
     """The renderer of §4.1 / §4.2 over :class:`DepthImages`.
 
@@ -288,6 +289,18 @@ class DepthObject:
         hull: visual hull (binary silhouettes, §5) instead of depth;
         to_world: (4, 4) object-to-world matrix (default: identity).
     """
+    n: int
+    hull: bool
+    c: list
+    a: float
+    delta: float
+    alpha_tex: list
+    color_tex: list
+    normal_tex: list | None
+    occupancy: mi.Bool
+    skip_empty: bool
+    to_world: mi.Transform4f
+    to_object: mi.Transform4f
 
     def __init__(self, images: DepthImages, slices: int, hull: bool = False, to_world=None):
         from mi_displace.slicing.geometry import MAX_SLICES, transform_pair

@@ -87,15 +87,73 @@ def test_area_lights_environment_and_aa_frozen(variant):
     assert np.abs(same(scene, plain, frozen) - first).max() > 0.01
 
 
-def test_a_bsdf_that_cannot_be_recorded_is_drawn_unfrozen_with_one_warning(variant):
-    """The depth object's BSDF keeps its images outside what a recording traverses (a
-    first frame recorded over it aborts the process): refused before recording — also as
-    the scene's first frame — drawn plain, the reason warned once."""
+def test_the_depth_object_frozen_through_moves_and_edits(variant):
+    """The depth object's model (a dataclass of its images' textures) and its BSDF's
+    per-interaction cache (a plain object, not traversed): recorded as the scene's first
+    frame, the plain frame bit for bit after a camera move and an edit of the sun."""
     scene, _ = load(scene_path("slicing_cup_depth.xml"), mode="approximation",
                     integrator="raster", res=32, slices=16)
     plain, frozen = pair()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")   # recorded, not refused
+        first = image(scene, frozen)
+    np.testing.assert_array_equal(first, image(scene, plain))
+    orbit(scene, 7.0)
+    moved = same(scene, plain, frozen)
+    params = mi.traverse(scene)
+    key = next(k for k in params.keys() if k.endswith("irradiance.value"))
+    params[key] = params[key] * 0.5
+    params.update()
+    assert np.abs(same(scene, plain, frozen) - moved).max() > 0.01
+    assert frozen.frozen.refused == {}
+
+
+def diffuse_sphere(bsdf_type: str):
+    return mi.load_dict({"type": "scene", "ball": {"type": "sphere", "bsdf": {"type": bsdf_type}},
+                         "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 16, "height": 16},
+                                    "to_world": mi.ScalarTransform4f().translate([0, 0, -4])},
+                         "sun": {"type": "directional", "direction": [0, 0, 1]}})
+
+
+def lambert():
+    """A diffuse BSDF class of 0.25 albedo read from an array (``albedo_array()``); made
+    once a variant is set."""
+    import drjit as dr
+
+    class Lambert(mi.BSDF):
+        def __init__(self, props):
+            super().__init__(props)
+            self.albedo = mi.Float(0.25, 0.25)
+            self.m_components = [mi.BSDFFlags.DiffuseReflection]
+            self.m_flags = mi.BSDFFlags.DiffuseReflection
+
+        def eval(self, ctx, si, wo, active=True):
+            value = dr.gather(mi.Float, self.albedo_array(), dr.zeros(mi.UInt32, dr.width(si.t)), active)
+            return mi.Color3f(value * dr.maximum(mi.Frame3f.cos_theta(wo), 0.0) / dr.pi)
+
+        def albedo_array(self):
+            return self.albedo
+
+        def eval_null_transmission(self, si, active=True):
+            return mi.Color3f(0.0)
+
+        def eval_diffuse_reflectance(self, si, active=True):
+            return mi.Color3f(0.25)
+
+    return Lambert
+
+
+def test_a_bsdf_declared_unrecordable_is_drawn_unfrozen_with_one_warning(variant):
+    """``FREEZABLE = False`` on a BSDF's class: refused before recording (a recording over
+    state Dr.Jit cannot traverse may abort the process), drawn plain, warned once."""
+    class Declared(lambert()):
+        FREEZABLE = False
+
+    mi.register_bsdf("test_declared_unrecordable", Declared)
+    scene = diffuse_sphere("test_declared_unrecordable")
+    plain, frozen = pair()
     with pytest.warns(UserWarning, match="raster: freeze: this scene's frames are drawn unfrozen "
-                                         r"\(BSDF .* is not recordable"):
+                                         r"\(BSDF .* is not recordable \(FREEZABLE = False\)"):
         first = image(scene, frozen)
     np.testing.assert_array_equal(first, image(scene, plain))
     with warnings.catch_warnings():
@@ -107,33 +165,21 @@ def test_a_recording_dr_jit_refuses_is_drawn_unfrozen(variant):
     """A BSDF whose array sits in a plain Python object (not traversed): Dr.Jit refuses the
     recording with an exception (the array was made before it and is no input); the frame
     is drawn plain, the reason warned."""
-    import drjit as dr
-
     class Holder:   # not a PyTree: a recording does not see its array
         def __init__(self):
-            self.albedo = dr.opaque(mi.Float, 0.25, 4)
+            self.albedo = mi.Float(0.25, 0.25)
 
-    class Hidden(mi.BSDF):
+    class Hidden(lambert()):
         def __init__(self, props):
             super().__init__(props)
             self.holder = Holder()
-            self.m_components, self.m_flags = [mi.BSDFFlags.DiffuseReflection], mi.BSDFFlags.DiffuseReflection
+            del self.albedo
 
-        def eval(self, ctx, si, wo, active=True):
-            value = dr.gather(mi.Float, self.holder.albedo, dr.zeros(mi.UInt32, dr.width(si.t)), active)
-            return mi.Color3f(value * dr.maximum(mi.Frame3f.cos_theta(wo), 0.0))
-
-        def eval_null_transmission(self, si, active=True):
-            return mi.Color3f(0.0)
-
-        def eval_diffuse_reflectance(self, si, active=True):
-            return mi.Color3f(0.25)
+        def albedo_array(self):
+            return self.holder.albedo
 
     mi.register_bsdf("test_hidden_array", Hidden)
-    scene = mi.load_dict({"type": "scene", "ball": {"type": "sphere", "bsdf": {"type": "test_hidden_array"}},
-                          "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 16, "height": 16},
-                                     "to_world": mi.ScalarTransform4f().translate([0, 0, -4])},
-                          "sun": {"type": "directional", "direction": [0, 0, 1]}})
+    scene = diffuse_sphere("test_hidden_array")
     plain, frozen = pair()
     with pytest.warns(UserWarning, match=r"\(Dr.Jit refused to record it: "):
         np.testing.assert_array_equal(image(scene, frozen), image(scene, plain))
