@@ -183,8 +183,8 @@ class Slicing(mi.Mesh):
         old = self.volume
         volume = SlicedVolume(old.bm, old.height, scale, int(slices), *self._settings)
         geo.fill_mesh(self, volume.walls)   # same topology: only the walls' heights move
-        self.volume = self.bsdf_ref.model = volume
-        self.bsdf_ref._cache = None
+        self.volume = volume
+        self.bsdf_ref.set_model(volume)
         self.build_stats = {**volume.stats, "slices_auto": False, **self._thickness(),
                             "build_s": time.perf_counter() - start}
 

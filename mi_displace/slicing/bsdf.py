@@ -43,6 +43,11 @@ class SlicingBSDF(MesostructureBSDF):
         self.self_shadows = bool(props.get("self_shadows", True))
         self._cache = _Prepared()
 
+    def set_model(self, model) -> None:
+        """Draw ``model`` from now on (a rebuilt volume); the last walk is forgotten."""
+        self.model = model
+        self._cache = _Prepared()
+
     def _facing(self, w):
         # the proxy is the volume's boundary: the fragment's own normal decides (nested BSDF)
         return dr.full(mi.Bool, True, dr.width(w))
