@@ -13,7 +13,10 @@ shared machine.
                  (integrator=raster res=512 mode=approximation unless given)
 
 Frames are drawn by ``raster`` with aa=1 at one sample per pixel, as ``mi-displace bench
-frames`` draws them.  Environment: REPS (7), ROUNDS (3)."""
+frames`` draws them.  Environment: REPS (7), ROUNDS (3), ORBIT (unset: the loaded view; a
+number n: each round's frames cycle through n camera positions of the bench's orbit,
+:func:`mi_displace.bench.frames._orbit` over +-ORBIT_DEG, the images of both compared at
+every one)."""
 import ast
 import importlib
 import os
@@ -43,6 +46,19 @@ def main(constant: str, a: str, b: str, scene_file: str, *params: str) -> None:
     defaults.update(p.split("=", 1) for p in params)
     scene, _ = load(scene_path(scene_file), **defaults)
     integrator = mi.load_dict({"type": "raster", "aa": 1})
+    views = [None]
+    if "ORBIT" in os.environ:
+        from mi_displace.bench.frames import ORBIT_DEG, _orbit
+        from mi_displace.core.dicing import fit_to_sensors
+        count = int(os.environ["ORBIT"])
+        views = _orbit(scene, np.linspace(-ORBIT_DEG, ORBIT_DEG, count))
+        sensor = mi.traverse(scene.sensors()[0])
+
+    def look(view) -> None:
+        if view is not None:
+            sensor["to_world"] = view
+            sensor.update()
+            fit_to_sensors(scene)
 
     def frame(which: str) -> np.ndarray:
         setattr(module, name, values[which])
@@ -51,14 +67,20 @@ def main(constant: str, a: str, b: str, scene_file: str, *params: str) -> None:
         finally:
             setattr(module, name, kept)
 
-    img_a, img_b = frame("A"), frame("B")
-    print(f"{scene_file} {' '.join(params)}: {constant} {a} -> {b}: identical "
-          f"{np.array_equal(img_a, img_b)}, max |difference| {float(np.abs(img_a - img_b).max()):.3g}, "
-          f"finite {bool(np.isfinite(img_b).all())}, mean {float(img_b.mean()):.4f}")
+    same, worst, finite = True, 0.0, True
+    for view in views:
+        look(view)
+        img_a, img_b = frame("A"), frame("B")
+        same &= bool(np.array_equal(img_a, img_b))
+        worst = max(worst, float(np.abs(img_a - img_b).max()))
+        finite &= bool(np.isfinite(img_a).all() and np.isfinite(img_b).all())
+    print(f"{scene_file} {' '.join(params)}: {constant} {a} -> {b}, {len(views)} view(s): identical "
+          f"{same}, max |difference| {worst:.3g}, finite {finite}, mean {float(img_b.mean()):.4f}")
     reps, rounds = int(os.environ.get("REPS", 7)), int(os.environ.get("ROUNDS", 3))
     for _ in range(rounds):
         times = {"A": [], "B": []}
-        for _ in range(reps):
+        for rep in range(reps):
+            look(views[rep % len(views)])
             for which in ("A", "B"):
                 dr.sync_thread()
                 start = time.perf_counter()
