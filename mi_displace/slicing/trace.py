@@ -79,7 +79,10 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
             query that finds nothing so near is asked again without the bound in the next
             iteration (not counted against ``max_iter``).  The polygon found is the nearest
             either way, and Embree computes its distance and barycentrics the same (they do
-            not depend on ``maxt``): the same walk, bit for bit (``None``: unbounded).
+            not depend on ``maxt``): the same walk, bit for bit (``None``: unbounded), but
+            for two polygons met within float rounding of the bound itself, where Embree's
+            own bound test could keep the farther one (none seen: tested on random rays,
+            and the donut's frames at 10 views are identical).
 
     Returns:
         ``(found, t, prim, bary, t_enter, t_exit, bottom)``: distance, face and barycentrics
