@@ -51,7 +51,8 @@ def alpha_test(kind: str, D: mi.Float, h_alpha: mi.Float) -> mi.Bool:
 def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
                         test: Callable[[mi.Point2f, mi.Float], mi.Bool],
                         active: mi.Bool, max_iter: int | mi.UInt32, opaque_base: bool = False,
-                        t_floor: mi.Float | None = None, coherent: bool = False):
+                        t_floor: mi.Float | None = None, coherent: bool = False,
+                        reach: float | None = None):
     """Walk the slice polygons of ``slices`` (a :class:`mi_displace.slicing.geometry.SliceScene`)
     from ``origin`` along unit ``d``.
 
@@ -72,6 +73,16 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
             parallel directions, e.g. a raster frame's shadow rays towards one light): the
             slices' BVH is queried with Embree's coherent flag (its packet traversal), which
             finds the same polygons, faster for such rays and slower for scattered ones.
+        reach: bound each query after the first to ``reach`` x the distance the previous
+            step advanced (the ray's ``maxt``): the BVH culls every node beyond it, so a
+            query from inside a stack of slices visits the nodes near its origin only.  A
+            query that finds nothing so near is asked again without the bound in the next
+            iteration (not counted against ``max_iter``).  The polygon found is the nearest
+            either way, and Embree computes its distance and barycentrics the same (they do
+            not depend on ``maxt``): the same walk, bit for bit (``None``: unbounded), but
+            for two polygons met within float rounding of the bound itself, where Embree's
+            own bound test could keep the farther one (none seen: tested on random rays,
+            and the donut's frames at 10 views are identical).
 
     Returns:
         ``(found, t, prim, bary, t_enter, t_exit, bottom)``: distance, face and barycentrics
@@ -83,10 +94,15 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
     n = dr.width(origin)
     inf, zero = dr.full(mi.Float, dr.inf, n), dr.zeros(mi.Float, n)
 
-    def body(i, t_acc, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom):
+    def body(i, t_acc, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom, near):
         ray = mi.Ray3f(origin + t_acc * d, d)
+        if reach is not None:
+            ray.maxt = near
         pi = scene.ray_intersect_preliminary(ray, coherent=coherent, active=going)
         valid = going & pi.is_valid()
+        retry = dr.zeros(mi.Bool, n)
+        if reach is not None:   # nothing within the bound: ask again, unbounded
+            retry = going & ~valid & (near < dr.inf)
         face = pi.prim_index
         flags = dr.gather(mi.UInt32, slices.flags, face, valid)
         fn = slices.face_normal(face, valid)
@@ -115,16 +131,23 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
         b0, b1 = dr.select(passes, bary[0], b0), dr.select(passes, bary[1], b1)
         found |= passes
         going = valid & ~passes & ~leaving & (i + 1 < max_iter)
-        t_acc = dr.select(going, t + step_past(p, fn, d, slices.length), t_acc)
-        return i + 1, t_acc, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom
+        step = step_past(p, fn, d, slices.length)
+        t_acc = dr.select(going, t + step, t_acc)
+        if reach is not None:
+            near = dr.select(retry, dr.inf, dr.select(going, reach * (pi.t + step), near))
+            i = dr.select(retry, i, i + 1)
+            going |= retry
+        else:
+            i = i + 1
+        return i, t_acc, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom, near
 
-    state = (mi.UInt32(0), mi.Float(zero), dr.zeros(mi.Bool, n), mi.Bool(active),
+    state = (dr.zeros(mi.UInt32, n), mi.Float(zero), dr.zeros(mi.Bool, n), mi.Bool(active),
              mi.Float(zero), dr.zeros(mi.UInt32, n), mi.Float(zero), mi.Float(zero),
-             mi.Float(inf), mi.Float(inf), dr.zeros(mi.Bool, n))
-    _, _, found, _, t_hit, prim, b0, b1, t_enter, t_exit, bottom = dr.while_loop(
+             mi.Float(inf), mi.Float(inf), dr.zeros(mi.Bool, n), mi.Float(inf))
+    _, _, found, _, t_hit, prim, b0, b1, t_enter, t_exit, bottom, _ = dr.while_loop(
         state=state, cond=lambda i, ray, found, going, *_: going, body=body,
         labels=("i", "t_acc", "found", "going", "t_hit", "prim", "b0", "b1", "t_enter",
-                "t_exit", "bottom"),
+                "t_exit", "bottom", "near"),
         label="slicing_polygons")
     t_enter = dr.select(t_enter == dr.inf, 0.0, dr.minimum(t_enter, t_exit))
     return found, t_hit, prim, (b0, b1), t_enter, t_exit, bottom
