@@ -40,7 +40,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from mi_displace.render import lights, shadow_map, zbuffer
+from mi_displace.render import lights, pixel_order, shadow_map, zbuffer
 
 VISIBILITY = ("raytrace", "zbuffer")
 SHADOWS = ("ray", "map", "none")
@@ -445,14 +445,17 @@ def pixel_rays(sensor: mi.Sensor, aa: int) -> tuple[mi.Ray3f, mi.Color3f, int, i
     """Primary rays through a fixed aa x aa pattern of each pixel (sub-cell centres).
 
     Returns:
-        (rays, weights, width, height); the rays of pixel p are p*aa^2 ... p*aa^2+aa^2-1.
+        (rays, weights, width, height); the rays of the pixel at frame lane p
+        (:mod:`.pixel_order`: 4 x 4 tiles; :func:`.pixel_order.image` makes the image) are
+        p*aa^2 ... p*aa^2+aa^2-1, its sub-samples row by row.
     """
-    w, h = sensor.film().crop_size()
+    w, h = (int(v) for v in sensor.film().crop_size())
     n = aa * aa
     idx = dr.arange(mi.UInt32, w * h * n)
-    pixel, sub = idx // n, idx % n
-    x = mi.Float(pixel % w) + (mi.Float(sub % aa) + 0.5) / aa
-    y = mi.Float(pixel // w) + (mi.Float(sub // aa) + 0.5) / aa
+    lane, sub = idx // n, idx % n
+    px, py = pixel_order.pixel_of(lane, w, h)
+    x = mi.Float(px) + (mi.Float(sub % aa) + 0.5) / aa
+    y = mi.Float(py) + (mi.Float(sub // aa) + 0.5) / aa
     ray, weight = sensor.sample_ray(0.0, 0.5, mi.Point2f(x / w, y / h), mi.Point2f(0.5))
     return ray, mi.Color3f(weight), int(w), int(h)
 
@@ -537,7 +540,7 @@ def _shaded(scene: mi.Scene, sensor: mi.Sensor, aa: int, limit: int, options: Op
         # the shading evaluated once (above): each channel's block_reduce would otherwise
         # launch its own copy of the whole shading kernel (3x the work for costly BSDFs)
         L = mi.Color3f([dr.block_reduce(dr.ReduceOp.Add, c, n) / n for c in L])
-    return mi.TensorXf(dr.ravel(L), (h, w, 3)), cut
+    return pixel_order.image(L, w, h), cut
 
 
 def scalar_state(*nodes) -> tuple:

@@ -153,7 +153,7 @@ def unshadowed(sm: ShadowMap, si: mi.SurfaceInteraction3f, to_light: mi.Vector3f
             inside &= p.z > 0
         X = mi.UInt32(dr.clip(gx, 0, res - 1))
         Y = mi.UInt32(dr.clip(gy, 0, res - 1))
-        stored = dr.gather(mi.Float, depth, Y * res + X, inside)
+        stored = dr.gather(mi.Float, depth, zbuffer.sample_index(view, X, Y, 1), inside)
         blocked = p.z - texel * sm.constant > stored
         visible = dr.select(inside, ~blocked, visible)
         pending &= ~inside

@@ -52,6 +52,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mi_displace.render import pixel_order
+
 #: Candidate (triangle, sample) pairs per rasterisation batch.
 CHUNK = 1 << 24
 #: Triangles with more candidate samples than ``small`` and at most this many loop over
@@ -274,22 +276,18 @@ def view_from_sensor(sensor: mi.Sensor, aa: int = 1) -> View:
 
 
 def sample_index(view: View, X: mi.UInt32, Y: mi.UInt32, aa: int) -> mi.UInt32:
-    """Index of grid sample (X, Y) in the order of ``raster.pixel_rays``
-    (pixel-major, aa x aa sub-samples row by row)."""
-    if aa == 1:
-        return Y * view.width + X
-    pixel = (Y // aa) * (view.width // aa) + X // aa
-    return pixel * (aa * aa) + (Y % aa) * aa + X % aa
+    """Index of grid sample (X, Y) in the order of ``raster.pixel_rays``: pixels in frame
+    order (:mod:`.pixel_order`), a pixel's aa x aa sub-samples row by row."""
+    lane = pixel_order.lane_of(X // aa, Y // aa, view.width // aa, view.height // aa)
+    return lane * (aa * aa) + (Y % aa) * aa + X % aa
 
 
 def sample_xy(view: View, index: mi.UInt32, aa: int) -> tuple[mi.UInt32, mi.UInt32]:
     """Grid sample (X, Y) of each :func:`sample_index` ``index`` (its inverse)."""
-    if aa == 1:
-        return index % view.width, index // view.width
     n = aa * aa
-    pixel, sub = index // n, index % n
-    w = view.width // aa
-    return (pixel % w) * aa + sub % aa, (pixel // w) * aa + sub // aa
+    lane, sub = index // n, index % n
+    px, py = pixel_order.pixel_of(lane, view.width // aa, view.height // aa)
+    return px * aa + sub % aa, py * aa + sub // aa
 
 
 #: The edges of a triangle (vertex index pairs).

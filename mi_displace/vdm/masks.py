@@ -21,6 +21,7 @@ import mitsuba as mi
 import numpy as np
 from scipy import ndimage
 
+from mi_displace.render import pixel_order
 from mi_displace.render.raster import pixel_rays
 
 
@@ -60,6 +61,7 @@ def geometry_masks(reference: mi.Scene, base: mi.Scene, tiling, occlusion_shift:
     du, dv = du - dr.round(du), dv - dr.round(dv)
     occl = both & (dr.sqrt(du * du + dv * dv) > occlusion_shift)
     shape = (h, w)
+    hit_r, hit_b, shadow, occl = (pixel_order.rows(m, w, h) for m in (hit_r, hit_b, shadow, occl))
     hr, hb = np.asarray(hit_r).reshape(shape), np.asarray(hit_b).reshape(shape)
     sil = hr != hb
     if dilate > 0:

@@ -38,6 +38,7 @@ import mitsuba as mi
 import numpy as np
 
 from mi_displace.render.lights import check as check_emitters, is_constant, is_delta
+from mi_displace.render import pixel_order
 from mi_displace.render.raster import pixel_rays
 from mi_displace.volume.displacement import Lookup
 from mi_displace.volume.field import NORMALS, AlbedoField, DisplacedVolume
@@ -363,4 +364,4 @@ def render(scene: mi.Scene, sensor: mi.Sensor, vol: DisplacedVolume, s: SliceSet
     if n > 1:
         dr.eval(L)
         L = mi.Color3f([dr.block_reduce(dr.ReduceOp.Add, c, n) / n for c in L])
-    return mi.TensorXf(dr.ravel(L), (h, w, 3))
+    return pixel_order.image(L, w, h)
