@@ -60,6 +60,7 @@ def lane_of(x: mi.UInt32, y: mi.UInt32, width: int, height: int) -> mi.UInt32:
 
 def rows(values, width: int, height: int):
     """``values`` (one entry per pixel in frame order, any Dr.Jit type) in row order."""
+    dr.eval(values)   # one kernel for all components (each gather would evaluate its own)
     i = dr.arange(mi.UInt32, width * height)
     return dr.gather(type(values), values, lane_of(i % width, i // width, width, height))
 
