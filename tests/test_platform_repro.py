@@ -72,3 +72,18 @@ def test_freeze_with_an_empty_array_input_aborts(mode, crashes):
     lines = outcome("freeze_empty_array.py", [mode], f"drjit {__import__('drjit').__version__}",
                     crashes, "unknown variable")
     assert crashes or lines[-1] == "ok [2, 3]"
+
+
+@pytest.mark.parametrize("mode, crashes", [("evaluated", True), ("inkernel", False)])
+def test_llvm_crashes_on_a_per_lane_divisor_of_a_loaded_array(mode, crashes):
+    """scripts/repro/llvm_division_crash.py (docs/platform.md): libLLVM 19.1 crashes compiling
+    a division of a loaded array by a clipped per-lane divisor (why ``pixel_order`` divides by
+    constants only); over an array made in the kernel it compiles.  When a Dr.Jit or LLVM
+    release fixes it, "evaluated" exits 0 and this fails: the note can go."""
+    import drjit as dr
+
+    if dr.detail.llvm_version()[:2] != (19, 1):
+        pytest.skip(f"measured with libLLVM 19.1; this process loaded {dr.detail.llvm_version()}")
+    lines = outcome("llvm_division_crash.py", [mode], f"drjit {dr.__version__}, libLLVM 19.1",
+                    crashes, "")
+    assert crashes or lines[-1] == "ok 30720"

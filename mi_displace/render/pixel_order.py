@@ -36,7 +36,8 @@ def pixel_of(lane: mi.UInt32, width: int, height: int) -> tuple[mi.UInt32, mi.UI
     """Pixel (x, y) of each frame lane ``lane`` in [0, width x height).
 
     Every division is by a constant (a tile's side, a band's lanes, the short sides), each
-    side chosen per lane: LLVM 19 crashed compiling divisions by a per-lane divisor here."""
+    side chosen per lane: libLLVM 19.1 crashes compiling a division by a per-lane divisor
+    here (``scripts/repro/llvm_division_crash.py``, docs/platform.md)."""
     cols_short, rows_short = _short(width, height)
     band = lane // (TILE * width)   # every band before the last holds TILE x width lanes
     rest = lane - band * (TILE * width)
