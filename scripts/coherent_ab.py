@@ -17,11 +17,11 @@ cleared in the incoherent frames; ``all``: both, and the z-buffer's slivers draw
 pieces in those frames too, ``zbuffer.TALL`` 0, i.e. every frame lever of this kind against
 none), REPS (7), ROUNDS (3)."""
 import os
-import statistics
 import sys
-import time
 
 import numpy as np
+
+from ab_timing import alternate
 
 
 def main(scene_file: str, *params: str) -> None:
@@ -66,18 +66,7 @@ def main(scene_file: str, *params: str) -> None:
     a, b = frame(False), frame(True)
     print(f"{scene_file} {' '.join(params)} (coherent: {which}): identical {np.array_equal(a, b)}, "
           f"finite {bool(np.isfinite(b).all())}, mean {float(b.mean()):.4f}")
-    reps, rounds = int(os.environ.get("REPS", 7)), int(os.environ.get("ROUNDS", 3))
-    for _ in range(rounds):
-        times = {False: [], True: []}
-        for _ in range(reps):
-            for coherent in (False, True):
-                dr.sync_thread()
-                start = time.perf_counter()
-                frame(coherent)
-                times[coherent].append(time.perf_counter() - start)
-        old, new = statistics.median(times[False]), statistics.median(times[True])
-        print(f"incoherent {old:.4f} s  coherent {new:.4f} s  coherent/incoherent {new / old:.3f}")
-
+    alternate(lambda label: frame(label == "coherent"), ("incoherent", "coherent"))
 
 if __name__ == "__main__":
     if len(sys.argv) < 2:

@@ -20,11 +20,11 @@ every one)."""
 import ast
 import importlib
 import os
-import statistics
 import sys
-import time
 
 import numpy as np
+
+from ab_timing import alternate
 
 
 def main(constant: str, a: str, b: str, scene_file: str, *params: str) -> None:
@@ -76,20 +76,7 @@ def main(constant: str, a: str, b: str, scene_file: str, *params: str) -> None:
         finite &= bool(np.isfinite(img_a).all() and np.isfinite(img_b).all())
     print(f"{scene_file} {' '.join(params)}: {constant} {a} -> {b}, {len(views)} view(s): identical "
           f"{same}, max |difference| {worst:.3g}, finite {finite}, mean {float(img_b.mean()):.4f}")
-    reps, rounds = int(os.environ.get("REPS", 7)), int(os.environ.get("ROUNDS", 3))
-    for _ in range(rounds):
-        times = {"A": [], "B": []}
-        for rep in range(reps):
-            look(views[rep % len(views)])
-            for which in ("A", "B"):
-                dr.sync_thread()
-                start = time.perf_counter()
-                frame(which)
-                dr.sync_thread()
-                times[which].append(time.perf_counter() - start)
-        old, new = statistics.median(times["A"]), statistics.median(times["B"])
-        print(f"A {old:.4f} s  B {new:.4f} s  B/A {new / old:.3f}")
-
+    alternate(frame, ("A", "B"), lambda rep: look(views[rep % len(views)]))
 
 if __name__ == "__main__":
     if len(sys.argv) < 5:

@@ -12,20 +12,20 @@ ratio: both versions see the same moments of a shared machine.
     SCENE    a file in scenes/ (e.g. slicing_plane_grazing.xml); name=value: its defaults
              (mode=approximation integrator=raster are set unless given)
 
-Environment: REPS (9), ROUNDS (3), AA (unset: the scene's integrator renders both frames;
+Environment: REPS (7), ROUNDS (3), AA (unset: the scene's integrator renders both frames;
 a number: ``raster`` with that ``aa`` at one sample a pixel, as ``mi-displace bench frames``
 draws with AA=1).  The modules' other users in the process see the swap too (a module's
 functions look up its globals, so the old functions call the old helpers)."""
 import importlib
 import os
-import statistics
 import subprocess
 import sys
-import time
 import types
 from pathlib import Path
 
 import numpy as np
+
+from ab_timing import alternate
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -71,17 +71,7 @@ def main(base: str, modules: str, scene: str, *params: str) -> None:
     a, b = frame("old"), frame("new")
     print(f"identical: {np.array_equal(a, b)}, max |difference| {float(np.abs(a - b).max()):.3g}, "
           f"finite: {bool(np.isfinite(b).all())}, mean {float(b.mean()):.4f}")
-    reps, rounds = int(os.environ.get("REPS", 9)), int(os.environ.get("ROUNDS", 3))
-    for _ in range(rounds):
-        times = {"old": [], "new": []}
-        for _ in range(reps):
-            for which in ("old", "new"):
-                dr.sync_thread()
-                start = time.perf_counter()
-                frame(which)
-                times[which].append(time.perf_counter() - start)
-        old, new = (statistics.median(times[w]) for w in ("old", "new"))
-        print(f"old {old:.4f} s  new {new:.4f} s  new/old {new / old:.3f}")
+    alternate(frame, ("old", "new"))
     use("new")
 
 

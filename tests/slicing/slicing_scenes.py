@@ -12,3 +12,12 @@ def bricks_torus(**kw):
               "to_uv": mi.ScalarTransform4f().scale([4, 2, 1])}
     return {"base": "torus", "major_radius": 1.0, "minor_radius": 0.4, "scale": 0.1,
             "height": bricks, "bsdf": MATERIAL, **kw}
+
+
+def donut(direction):
+    """A small brick donut (16 x 16 torus base, 8 slices) of the slicing plugin."""
+    return {"type": "slicing", "base": "torus", "major_radius": 1.0, "minor_radius": 0.4,
+            "resolution": 16, "scale": 0.08, "slices": 8, "direction": direction,
+            "draw_base": True,
+            "height": {"type": "bricks", "rows": 4, "columns": 2, "mortar": 0.12, "bevel": 0.2,
+                       "to_uv": mi.ScalarTransform4f().scale([4, 2, 1])}}

@@ -8,15 +8,8 @@ import pytest
 from mi_displace.evaluate.metrics import flip
 from mi_displace.render import pixel_order, zbuffer
 from mi_displace.slicing import rasterised
+from slicing_scenes import donut
 
-
-
-def donut(direction):
-    return {"type": "slicing", "base": "torus", "major_radius": 1.0, "minor_radius": 0.4,
-            "resolution": 16, "scale": 0.08, "slices": 8, "direction": direction,
-            "draw_base": True,
-            "height": {"type": "bricks", "rows": 4, "columns": 2, "mortar": 0.12, "bevel": 0.2,
-                       "to_uv": mi.ScalarTransform4f().scale([4, 2, 1])}}
 
 
 def both(helpers, shape, sensor):
