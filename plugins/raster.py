@@ -41,9 +41,10 @@ SPEC = PluginSpec(
               "texels per side of each area-light point (shadows=map)", low=1, high=16384),
         Param("freeze", "bool", False, "record the frame's kernels once (`dr.freeze`) and replay "
               "them: a frame costs its kernels, not Python tracing and launches; recorded again "
-              "when an `mi.traverse` parameter's layout or scalar value changes; scenes Dr.Jit "
-              "cannot record (slicing shapes, BSDFs that read back) are drawn unfrozen with one "
-              "warning; needs visibility=raytrace, shadows=ray or none"),
+              "when an `mi.traverse` parameter's layout or scalar value changes; shapes that draw "
+              "themselves (slicing) draw before the recorded frame; scenes Dr.Jit cannot record "
+              "(BSDFs whose state it cannot traverse) are drawn unfrozen with one warning; needs "
+              "visibility=raytrace, shadows=ray or none"),
     ),
     example="""<integrator type="raster">
     <string name="shadows" value="ray"/>

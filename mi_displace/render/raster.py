@@ -27,7 +27,10 @@ z-buffer and shadow maps no acceleration structure is needed
 A shape may draw itself GPU-style before the frame: :func:`render` calls
 ``raster_begin(sensor, aa)`` on every shape that has it before visibility and
 ``raster_end()`` after shading (the slicing shapes rasterise their slices there,
-:mod:`mi_displace.slicing.rasterised`).
+:mod:`mi_displace.slicing.rasterised`).  Under ``freeze`` that drawing stays outside the
+recording (it reads back what it drew) and what it leaves is the recorded frame's input, so
+it must be reachable from the shape as Dr.Jit arrays and PyTrees (dataclasses, tuples,
+dicts; Dr.Jit does not look into a ``NamedTuple`` held by a plugin).
 
 Nothing is random: two renders are bit-identical.
 """
@@ -567,9 +570,10 @@ class FrozenFrames:
     The recording is keyed on the frame's Dr.Jit inputs (traversed through the scene and
     the sensor: geometry, textures, the camera), on ``aa``, the layer limit and the options,
     and on :func:`scalar_state` (the values a kernel holds as constants): an edit through
-    ``mi.traverse`` of any of them records the frame again.  Frames of scenes whose shapes
-    draw themselves (``raster_begin``: the slicing shapes rasterise with read-backs), whose
-    BSDFs say they cannot be recorded (a class attribute ``FREEZABLE = False``, for a user's
+    ``mi.traverse`` of any of them records the frame again.  Shapes that draw themselves
+    (``raster_begin``: the slicing shapes rasterise their slices with read-backs) draw
+    before the recorded frame, which reads what they drew.  Frames of scenes whose BSDFs
+    say they cannot be recorded (a class attribute ``FREEZABLE = False``, for a user's
     plugin whose state Dr.Jit cannot traverse) and whose recording Dr.Jit refuses (an array
     a recording does not find among its inputs) are drawn unfrozen, with one warning per
     scene naming the reason.
@@ -596,11 +600,11 @@ class FrozenFrames:
                              "what a frame finds)")
         return options
 
-    def __call__(self, scene, sensor, aa, limit, options, light_data, drawn):
+    def __call__(self, scene, sensor, aa, limit, options, light_data):
         """The frame, replayed (or recorded) as ``(image, samples cut short)``; ``None``
         when it cannot be frozen (the reason remembered for ``scene``, warned about once)."""
         if id(scene) not in self.refused:
-            why = self.unrecordable(scene, drawn)
+            why = self.unrecordable(scene)
             if why is not None:
                 self._refuse(scene, why)
         if id(scene) in self.refused:
@@ -615,14 +619,10 @@ class FrozenFrames:
         return image, int(cut[0])
 
     @staticmethod
-    def unrecordable(scene, drawn) -> str | None:
-        """Why ``scene``'s frame must not be recorded, known before recording: a shape of
-        ``drawn`` (it draws itself before the frame and reads back what it drew), or a BSDF
+    def unrecordable(scene) -> str | None:
+        """Why ``scene``'s frame must not be recorded, known before recording: a BSDF
         whose class says ``FREEZABLE = False`` (its state is not traversable: a recording
         over it may abort the process rather than raise).  ``None`` otherwise."""
-        if drawn:
-            return (f"shape {drawn[0].id() or type(drawn[0]).__name__!r} draws itself before "
-                    "the frame (raster_begin) and reads back what it drew")
         for shape in scene.shapes():   # a handful of shapes
             bsdf = shape.bsdf()
             if not getattr(bsdf, "FREEZABLE", True):
@@ -680,16 +680,16 @@ def render(scene: mi.Scene, sensor: mi.Sensor, aa: int = 1, max_layers: int | No
     limit = layer_limit(every, scene if shapes is None else None) if max_layers is None else max_layers
     drawn = [s for s in every if hasattr(s, "raster_begin")]
     result = None
-    if frozen is not None:
-        result = frozen(scene, sensor, aa, limit, options, light_data, drawn)
-    if result is None:
-        try:
-            for shape in drawn:   # a handful of shapes
-                shape.raster_begin(sensor, aa)
+    try:
+        for shape in drawn:   # a handful of shapes; outside a recording (they read back)
+            shape.raster_begin(sensor, aa)
+        if frozen is not None:
+            result = frozen(scene, sensor, aa, limit, options, light_data)
+        if result is None:
             result = _shaded(scene, sensor, aa, limit, options, light_data, geom)
-        finally:
-            for shape in drawn:
-                shape.raster_end()
+    finally:
+        for shape in drawn:
+            shape.raster_end()
     image, cut = result
     warn_exhausted(int(dr.count(cut)[0]) if isinstance(cut, mi.Bool) else cut,
                    int(w) * int(h) * aa * aa, limit)

@@ -399,6 +399,7 @@ def fill_mesh(mesh: mi.Mesh, sm: SliceMesh) -> None:
     params.update()
 
 
+@dataclass(init=False, eq=False)   # its fields a PyTree: a frozen raster frame finds the arrays
 class SliceScene:
     """Slice polygons in a scene of their own (not seen by Mitsuba's integrators, so their
     shadow rays meet only the volume's walls) with the slice attributes as Dr.Jit buffers,
@@ -409,6 +410,17 @@ class SliceScene:
     (the bounding-box diagonal [world units], the size the walks' offsets are relative to;
     an opaque Float of width 1).
     """
+
+    scene: mi.Scene
+    faces: mi.UInt32
+    uv: mi.Float
+    ramp: mi.Float
+    bn: mi.Float
+    su: mi.Float
+    sv: mi.Float
+    flags: mi.UInt32
+    fn: mi.Float
+    length: mi.Float
 
     def __init__(self, sm: SliceMesh, name: str):
         mesh = mi.Mesh(name, len(sm.positions), len(sm.faces), has_vertex_normals=False,
@@ -458,6 +470,7 @@ class SliceScene:
         return tuple(mi.Vector3f(*self.lerp(b, 3, idx, bary, active)) for b in (self.bn, self.su, self.sv))
 
 
+@dataclass(init=False, eq=False)   # its fields a PyTree: a frozen raster frame finds the arrays
 class MeshCoordinates:
     """(u, v, h) of world points inside a mesh base's displacement volume, for the screen-
     space slices (§3.3) where a parametric base has :func:`base_coordinates`.
@@ -471,6 +484,8 @@ class MeshCoordinates:
     :func:`prism_shape`'s)."""
 
     ITERATIONS = 4
+    base: "SliceScene"
+    scale: mi.Float
 
     def __init__(self, bm: BaseMesh, scale: float):
         v = len(bm.positions)

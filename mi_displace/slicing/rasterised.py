@@ -45,7 +45,7 @@ PACKED = 16
 ON_RAY_EPS, ON_SAMPLE_CELLS = 1e-4, 1e-2
 
 
-@dataclass
+@dataclass(init=False, eq=False)   # its fields a PyTree: a frozen raster frame finds the arrays
 class FrameBuffer:
     """The front-most passing slice fragment of every sample of one view.
 
@@ -61,15 +61,25 @@ class FrameBuffer:
             Float; :attr:`hit` unpacks it.
         eye: camera position (opaque Point3f, world units; perspective) or None (orthographic).
         length: the volume's size [world units] that :data:`ON_RAY_EPS` is relative to (opaque Float).
+        to_local, q0, dq: the view's :class:`~mi_displace.render.zbuffer.ViewUniforms` the
+            lookup reads, as fields (a frozen frame traverses dataclass fields; with the
+            ``NamedTuple`` as one field, Dr.Jit refused the recording).
     """
 
-    view: zbuffer.View
-    aa: int
     covered: mi.Bool
     found: mi.Bool
     packed: mi.Float
     eye: mi.Point3f | None
     length: mi.Float
+    to_local: mi.Transform4f
+    q0: mi.Point2f
+    dq: mi.Vector2f
+
+    def __init__(self, view: zbuffer.View, aa: int, covered: mi.Bool, found: mi.Bool,
+                 packed: mi.Float, eye: mi.Point3f | None, length: mi.Float):
+        self.view, self.aa = view, aa   # not fields: Python values the frame's kernels are traced with
+        self.covered, self.found, self.packed, self.eye, self.length = covered, found, packed, eye, length
+        self.to_local, self.q0, self.dq = view.uniforms.to_local, view.uniforms.q0, view.uniforms.dq
 
     @property
     def hit(self) -> Hit:
@@ -87,7 +97,7 @@ class FrameBuffer:
             caller walks the slices itself.
         """
         view = self.view
-        local, q0, dq = view.uniforms.to_local, view.uniforms.q0, view.uniforms.dq
+        local, q0, dq = self.to_local, self.q0, self.dq
         dl = local @ d
         if view.perspective:
             r = origin - self.eye

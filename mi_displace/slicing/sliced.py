@@ -64,6 +64,7 @@ class Hit:
         return Hit(*(dr.select(mask, a, b) for a, b in zip(self.fields(), other.fields())))
 
 
+@dataclass(init=False, eq=False)   # its fields a PyTree: a frozen raster frame finds the arrays
 class SlicedVolume:
     """The slices of one displaced surface.
 
@@ -81,6 +82,21 @@ class SlicedVolume:
             (:func:`mi_displace.slicing.geometry.family_bytes`) and a larger one refused
             before anything is built.  None: unbounded.
     """
+
+    # the fields: what a frame's kernels read (Dr.Jit arrays, scenes, textures), found by a
+    # frozen raster frame; a rebuild (a new ``scale`` or ``slices``) makes new scenes, so a
+    # frozen frame records again, and the sizes the kernels read are opaque arrays
+    height: mi.Texture
+    families: dict
+    walls_scene: geo.SliceScene
+    frame: object            # the rasterised FrameBuffer of the current raster frame, or None
+    coherent: bool
+    to_world: mi.Transform4f
+    to_object: mi.Transform4f
+    delta: mi.Float | None
+    mesh_coords: geo.MeshCoordinates | None
+    kernel_scale: mi.Float
+    shadow_offsets: tuple
 
     def __init__(self, bm: geo.BaseMesh, height: mi.Texture, scale: float, slices: int,
                  direction: str, alpha: str, ratio_scaling: bool = True, opaque_base: bool = False,
@@ -147,6 +163,7 @@ class SlicedVolume:
         #: object <-> world (Dr.Jit transforms): the family choice and the screen-space
         #: planes are made in object space, so any ``to_world`` moves them with the surface
         self.to_world, self.to_object = geo.transform_pair(bm.to_world)
+        self.delta = self.mesh_coords = None
         if direction == "screen":
             self.delta = dr.opaque(mi.Float, self.scale / slices)   # object units
             #: a mesh base's (u, v, h) of a point (a parametric one's are closed-form)

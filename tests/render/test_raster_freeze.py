@@ -185,15 +185,33 @@ def test_a_recording_dr_jit_refuses_is_drawn_unfrozen(variant):
         np.testing.assert_array_equal(image(scene, frozen), image(scene, plain))
 
 
-def test_a_shape_that_draws_itself_is_drawn_unfrozen(variant):
-    """Slicing shapes rasterise their slices before the frame (``raster_begin``) and read
-    back what they drew: not recorded, drawn plain, the shape named."""
+@pytest.mark.parametrize("direction", ["a", "best", "screen"])
+def test_the_sliced_donut_frozen_through_moves_and_rebuilds(variant, direction):
+    """The slicing shape rasterises its slices before the frame (``raster_begin``, outside
+    the recording) and the recorded frame reads what it drew (the volume and its frame
+    buffer as dataclasses): recorded, not refused, and the plain frame bit for bit after a
+    camera move and after ``scale`` and ``slices`` edits (a new volume: new slice scenes
+    and counts)."""
     scene, _ = load(scene_path("slicing_donut.xml"), mode="approximation", integrator="raster",
-                    res=32, coarse=16, direction="screen")
+                    res=32, coarse=16, slices=12, direction=direction)
     plain, frozen = pair()
-    want = image(scene, plain)
-    with pytest.warns(UserWarning, match=r"draws itself before the frame \(raster_begin\)"):
-        np.testing.assert_array_equal(image(scene, frozen), want)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")   # recorded, not refused
+        first = image(scene, frozen)
+    np.testing.assert_array_equal(first, image(scene, plain))
+    orbit(scene, 11.0)
+    moved = same(scene, plain, frozen)
+    assert np.abs(moved - first).max() > 0.01
+    params = mi.traverse(scene)
+    shape = next(k.rsplit(".", 1)[0] for k in params.keys() if k.endswith(".slices"))
+    last = moved
+    for key, value in (("scale", 0.07), ("slices", 5)):
+        params[f"{shape}.{key}"] = mi.Float(value)
+        params.update()
+        edited = same(scene, plain, frozen)
+        assert np.abs(edited - last).max() > 0.01, key
+        last = edited
+    assert frozen.frozen.refused == {}
 
 
 @pytest.mark.parametrize("option", [{"visibility": "zbuffer"}, {"shadows": "map"}])
