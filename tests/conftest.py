@@ -7,8 +7,10 @@ as in Mitsuba's ``src/conftest.py``, a variant that cannot run gets no test item
 """
 import gc
 import os
+import zlib
 
 import drjit as dr
+import numpy as np
 import pytest
 
 import mi_displace
@@ -31,6 +33,14 @@ def variant(request):
 def variant_llvm():
     """The default CPU variant only (tests of CPU-specific behaviour)."""
     return mi_displace.init("llvm_ad_rgb")
+
+
+@pytest.fixture
+def rng(request):
+    """A NumPy generator seeded by the test's own name: each test draws the same points
+    whatever ran before it in its worker (a module-wide generator made results depend on
+    pytest-xdist's distribution)."""
+    return np.random.default_rng(zlib.crc32(request.node.name.encode()))
 
 
 @pytest.fixture(autouse=True)

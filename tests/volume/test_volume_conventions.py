@@ -12,8 +12,6 @@ from scipy.ndimage import map_coordinates
 
 from volume_helpers import points as _p, to_numpy as _np
 
-RNG = np.random.default_rng(11)
-
 
 def _trilinear(data, lo, hi, p):
     """Voxel-centred trilinear O(p) of ``data`` (z, y, x) filling the box [lo, hi], clamped
@@ -43,36 +41,36 @@ def _write_raw(tmp_path, data, meta):
     return path
 
 
-def test_raw_object_is_centred_with_its_longest_side_one(variant, tmp_path):
+def test_raw_object_is_centred_with_its_longest_side_one(variant, tmp_path, rng):
     """dims × spacing gives the aspect; the box is centred at the origin, longest side 1."""
     from mi_displace.volume.objects import load_raw
 
-    data = RNG.integers(0, 1000, (3, 4, 10)).astype(np.uint16)      # nz, ny, nx
+    data = rng.integers(0, 1000, (3, 4, 10)).astype(np.uint16)      # nz, ny, nx
     vol = load_raw(_write_raw(tmp_path, data, {"dtype": "uint16", "spacing": [0.5, 2.0, 3.0]}))
     size = np.array([10 * 0.5, 4 * 2.0, 3 * 3.0])                    # x, y, z extents: 5, 8, 9
     np.testing.assert_allclose(vol.bbox_max, 0.5 * size / 9.0)
     np.testing.assert_allclose(vol.bbox_min, -0.5 * size / 9.0)
 
 
-def test_object_is_voxel_centred_trilinear_and_zero_outside_its_box(variant):
+def test_object_is_voxel_centred_trilinear_and_zero_outside_its_box(variant, rng):
     """A voxel's centre reads its stored value; between centres O is trilinear; in the outer
     half voxel it is the edge voxel's value (clamp); outside the box it is 0."""
     from mi_displace.volume.objects import ObjectVolume
 
-    data = RNG.random((5, 7, 6)).astype(np.float32)
+    data = rng.random((5, 7, 6)).astype(np.float32)
     lo, hi = np.array([-0.3, -0.2, 0.1]), np.array([0.9, 0.5, 0.6])
     vol = ObjectVolume(data, lo, hi, value_range=(0.0, 1.0))
     h = (hi - lo) / np.array([6, 7, 5])
     k = np.stack(np.meshgrid(np.arange(6), np.arange(7), np.arange(5), indexing="ij"), -1).reshape(-1, 3)
     centres = lo + (k + 0.5) * h
     np.testing.assert_allclose(np.array(vol.density(_p(centres))), data[k[:, 2], k[:, 1], k[:, 0]], atol=2e-6)
-    p = RNG.uniform(lo - 0.1, hi + 0.1, (20000, 3))
+    p = rng.uniform(lo - 0.1, hi + 0.1, (20000, 3))
     keep = (np.abs(p - lo) > 1e-5).all(1) & (np.abs(p - hi) > 1e-5).all(1)   # not on a face's rounding
     got, truth = np.array(vol.density(_p(p))), _trilinear(data, lo, hi, p)
     np.testing.assert_allclose(got[keep], truth[keep], atol=2e-6)
     # points on a face belong to the box: the edge voxels' values
-    faces = lo + RNG.random((600, 3)) * (hi - lo)
-    axis, side = RNG.integers(0, 3, 600), RNG.random(600) < 0.5
+    faces = lo + rng.random((600, 3)) * (hi - lo)
+    axis, side = rng.integers(0, 3, 600), rng.random(600) < 0.5
     faces[np.arange(600), axis] = np.where(side, lo[axis], hi[axis])
     on_face = np.array(vol.density(_p(faces)))
     assert on_face.min() > 0
@@ -85,12 +83,12 @@ def test_object_is_voxel_centred_trilinear_and_zero_outside_its_box(variant):
     np.testing.assert_allclose(got[border], truth[border], atol=2e-6)
 
 
-def test_values_map_linearly_from_value_range_to_unit_and_clip(variant, tmp_path):
+def test_values_map_linearly_from_value_range_to_unit_and_clip(variant, tmp_path, rng):
     """Sidecar ``value_range`` (lo, hi) -> (0, 1), values beyond it clipped; without one the
     data's own min and max."""
     from mi_displace.volume.objects import load_raw
 
-    data = RNG.integers(0, 60000, (4, 5, 6)).astype(np.uint16)
+    data = rng.integers(0, 60000, (4, 5, 6)).astype(np.uint16)
     with_range = load_raw(_write_raw(tmp_path, data, {"dtype": "uint16", "value_range": [10000, 40000]}))
     np.testing.assert_allclose(with_range.data, np.clip((data - 10000.0) / 30000.0, 0, 1), atol=1e-6)
     assert (with_range.data == 0).sum() > 0 and (with_range.data == 1).sum() > 0
@@ -98,7 +96,7 @@ def test_values_map_linearly_from_value_range_to_unit_and_clip(variant, tmp_path
     np.testing.assert_allclose(own.data, (data - data.min()) / float(data.max() - data.min()), atol=1e-6)
 
 
-def test_gaussian_is_renormalised_and_fades_above_the_cube(variant):
+def test_gaussian_is_renormalised_and_fades_above_the_cube(variant, rng):
     """D_z = -amount at the top centre (g renormalised to 1 there), 0 on the cube's sides,
     faded linearly from z = 1 to 2 and 0 beyond; the placement-free formula elsewhere."""
     from mi_displace.volume.displacement import PlacedMap
@@ -109,13 +107,13 @@ def test_gaussian_is_renormalised_and_fades_above_the_cube(variant):
                         [0.0, 0.5, 0.9], [0.5, 1.0, 0.9], [1.2, 0.5, 0.9], [0.5, 0.5, -0.2]])
     d, alpha = m.exact(_p(anchors))
     np.testing.assert_allclose(_np(d)[:, 2], [-0.4, -0.2, -0.2, 0, 0, 0, 0, 0, 0], atol=1e-6)
-    l = RNG.uniform([-0.2, -0.2, -0.5], [1.2, 1.2, 2.5], (20000, 3))
+    l = rng.uniform([-0.2, -0.2, -0.5], [1.2, 1.2, 2.5], (20000, 3))
     d, alpha = m.exact(_p(l))
     np.testing.assert_allclose(_np(d)[:, 2], _gaussian_d(l, amount, sigma), atol=1e-6)
     assert np.abs(_np(d)[:, :2]).max() == 0 and np.array(alpha).min() == 1.0
 
 
-def test_slabs_above_the_top_slab_fade_back_to_rest(variant):
+def test_slabs_above_the_top_slab_fade_back_to_rest(variant, rng):
     """Above the top slab (z' > top) the top slab's lift fades linearly to 0 over 0.5: the
     pre-image is continuous at the top and lies above the object (z > 1), so nothing is
     shown twice; from top + 0.5 up the map is the identity."""
@@ -125,7 +123,7 @@ def test_slabs_above_the_top_slab_fade_back_to_rest(variant):
     top = (n - 1) * (1 / n + gap) + 1 / n                       # 1.4
     m = PlacedMap("slabs", {"count": n, "gap": gap})
     z = np.concatenate([[top - 1e-4, top + 1e-4, top + 0.25, top + 0.5, top + 0.9],
-                        RNG.uniform(top, top + 1.0, 2000)])
+                        rng.uniform(top, top + 1.0, 2000)])
     l = np.stack([np.full_like(z, 0.5), np.full_like(z, 0.5), z], 1)
     d, alpha = m.exact(_p(l))
     dz = _np(d)[:, 2]
@@ -159,12 +157,12 @@ def test_d_k_stores_snorm_displacement_and_unorm_alpha(variant, bits):
     assert a.min() == 0 and 0 < a.max() <= 2 ** bits - 1
 
 
-def test_plugin_density_is_the_documented_chain(variant, tmp_path):
+def test_plugin_density_is_the_documented_chain(variant, tmp_path, rng):
     """sigma_t of ``displaced_volume`` (reference mode) at world points p' against NumPy:
     p = p' + L D(M⁻¹ p') with M from ``map0_to_world`` (L its linear part), O(p) voxel-centred
     in the centred, longest-side-1 box of the raw file (0 outside), τ the tf_low/tf_high
     ramp, times density_scale."""
-    data = RNG.integers(0, 50000, (8, 10, 12)).astype(np.uint16)
+    data = rng.integers(0, 50000, (8, 10, 12)).astype(np.uint16)
     raw = _write_raw(tmp_path, data, {"dtype": "uint16", "spacing": [1.0, 1.0, 1.5], "value_range": [5000, 45000]})
     M = np.array([[0.8, 0, 0, -0.4], [0, 0.6, 0, -0.3], [0, 0, 0.5, -0.45], [0, 0, 0, 1]])
     to_world = mi.ScalarTransform4f().translate([-0.4, -0.3, -0.45]).scale([0.8, 0.6, 0.5])
@@ -174,7 +172,7 @@ def test_plugin_density_is_the_documented_chain(variant, tmp_path):
                         "tf_low": tf_low, "tf_high": tf_high, "density_scale": scale,
                         "map0_type": "gaussian", "map0_amount": amount, "map0_sigma": sigma,
                         "map0_to_world": to_world})
-    pp = RNG.uniform(-0.7, 0.7, (30000, 3))
+    pp = rng.uniform(-0.7, 0.7, (30000, 3))
     it = mi.Interaction3f()
     it.p = _p(pp)
     got = np.array(vol.eval_1(it))

@@ -10,7 +10,6 @@ import pytest
 from volume_helpers import points as _p, to_numpy as _np
 
 
-RNG = np.random.default_rng(7)
 M_ROT = np.array([[0.0, -1.2, 0, 0.3], [0.9, 0, 0, -0.2], [0, 0, 1.1, 0.1], [0, 0, 0, 1]])
 
 
@@ -19,13 +18,13 @@ def _to_world(m, l):
 
 
 @pytest.mark.parametrize("kind", ["wave", "gaussian", "seam", "slabs", "peel"])
-def test_exact_inverse_undoes_the_closed_form_forward_map(variant, kind):
+def test_exact_inverse_undoes_the_closed_form_forward_map(variant, kind, rng):
     """G(F(p)) = p with F the forward map in closed form, placed by a rotation + scale M."""
     from mi_displace.volume.displacement import PlacedMap
 
     m = PlacedMap(kind, to_world=M_ROT)
     q = m.params
-    l = RNG.uniform(0.05, 0.95, (4000, 3))
+    l = rng.uniform(0.05, 0.95, (4000, 3))
     x, y, z = l.T
     f = l.copy()
     if kind == "wave":
@@ -72,14 +71,14 @@ def _peel_forward(l, q):
 
 @pytest.mark.parametrize("params", [{"curl": 1.0}, {"curl": 0.0}, {"curl": 0.5, "angle": 85.0},
                                     {"curl": 1.0, "angle": 80.0, "radius": 0.6}])
-def test_peel_inverse_undoes_its_forward_map(variant, params):
+def test_peel_inverse_undoes_its_forward_map(variant, params, rng):
     """The curling peel (and the rigid hinge, curl 0) with the hinge inside the cube: lid,
     the squeezed part right of the hinge and (radius 0.6) the fade zone all come back; the
     lid's underside turns by θ(r) + atan(r θ'(r)) > 90° at the radius when fully curled."""
     from mi_displace.volume.displacement import PlacedMap
 
     m = PlacedMap("peel", {"hinge": 0.7, "height": 0.4, **params}, to_world=M_ROT)
-    l = RNG.uniform(0.0, 1.0, (6000, 3))
+    l = rng.uniform(0.0, 1.0, (6000, 3))
     f = _peel_forward(l, m.params)
     assert (np.abs(f - l).max(axis=1) > 1e-3).mean() > 0.4             # most points move
     d, alpha = m.exact(_p(_to_world(M_ROT, f)))
@@ -118,29 +117,37 @@ def test_cuts_have_alpha_zero(variant):
 
 
 def test_sampled_map_matches_exact_and_bits_order(variant):
-    """D_k reproduces D between its nodes; quantisation error: 8 bit > 16 bit > float."""
+    """D_k reproduces D between its nodes; quantisation moves D_k by at most half a level.
+
+    The quantised maps are compared with the float map (not with D): against D, the trilinear
+    reconstruction error can cancel a level's rounding at the worst point, so 8 bit beating
+    16 bit there is not a property."""
     from mi_displace.volume.displacement import DisplacementChain, PlacedMap
 
-    pts = _p(_to_world(M_ROT, RNG.uniform(0.1, 0.9, (3000, 3))))
-    exact = DisplacementChain([PlacedMap("gaussian", to_world=M_ROT)]).exact(pts)
-    errors = {}
+    rng = np.random.default_rng(11)                       # this test's own points, not the order's
+    pts = _p(_to_world(M_ROT, rng.uniform(0.1, 0.9, (3000, 3))))
+    exact = _np(DisplacementChain([PlacedMap("gaussian", to_world=M_ROT)]).exact(pts).p)
+    moved = {}
     for bits in (8, 16, 32):
         chain = DisplacementChain([PlacedMap("gaussian", to_world=M_ROT, resolution=(48, 48, 48))], bits=bits)
-        r = chain.approximate(pts)
-        errors[bits] = np.abs(_np(r.p) - _np(exact.p)).max()
+        moved[bits] = _np(chain.approximate(pts).p)
         scale = chain.sampled_maps()[0].scale
-    assert errors[8] > errors[16] >= 0.99 * errors[32]
-    assert errors[32] < 0.02 * scale                    # trilinear reconstruction of a smooth field
-    assert errors[8] <= errors[32] + 1.5 * scale / 255  # 8-bit: at most a level and a half
+    assert np.isfinite(np.stack(list(moved.values()))).all()
+    assert np.abs(moved[32] - exact).max() < 0.02 * scale     # trilinear reconstruction of a smooth field
+    q8, q16 = (np.abs(moved[b] - moved[32]).max() for b in (8, 16))
+    half8, half16 = scale / 254, scale / 65534                # snorm: 2^(bits-1) - 1 levels each side
+    assert 0.5 * half8 < q8 <= 1.01 * half8 + 1e-6           # 8 bit: visible, within half a level
+    assert q16 <= 1.01 * half16 + 1e-6
+    assert q16 < q8 / 50
 
 
-def test_jacobian_texture_matches_finite_differences(variant):
+def test_jacobian_texture_matches_finite_differences(variant, rng):
     from mi_displace.volume.displacement import PlacedMap
 
     m = PlacedMap("wave", {"amount": 0.08, "frequency": 1.0}, to_world=M_ROT, resolution=(96, 16, 8))
     s = m.sampled(32, 0.0)
     # away from the window's kinks (x, y in 0.1 / 0.9) by more than one D_k voxel
-    l = RNG.uniform(0.25, 0.75, (500, 3))
+    l = rng.uniform(0.25, 0.75, (500, 3))
     pw = _to_world(M_ROT, l)
     jac, _ = s.derivatives(_p(pw), False)
     # lookup gives Jᵀ; entries that are 0 in every lane (unstored channels) may be one literal lane
@@ -182,10 +189,10 @@ def test_bad_parameters_are_refused(variant):
         DisplacementChain([], bits=12)
 
 
-def test_zero_displacement_is_bit_identical(variant):
+def test_zero_displacement_is_bit_identical(variant, rng):
     from mi_displace.volume.displacement import DisplacementChain, PlacedMap
 
-    pts = _p(RNG.uniform(-1, 1, (2000, 3)))
+    pts = _p(rng.uniform(-1, 1, (2000, 3)))
     maps = [PlacedMap("gaussian", {"amount": 0.0}, to_world=M_ROT), PlacedMap("wave", {"amount": 0.0})]
     for bits in (8, 16, 32):
         for comp in ("on_the_fly", "precomputed"):
@@ -197,7 +204,7 @@ def test_zero_displacement_is_bit_identical(variant):
             assert np.array_equal(B, np.repeat(np.eye(3).ravel()[:, None], B.shape[1], 1))
 
 
-def test_composition_is_not_commutative_and_both_compositions_agree(variant):
+def test_composition_is_not_commutative_and_both_compositions_agree(variant, rng):
     """Fig. 5: wave then peel differs from peel then wave; on-the-fly ~ precomputed ~ exact."""
     from mi_displace.volume.displacement import DisplacementChain, PlacedMap
 
@@ -205,7 +212,7 @@ def test_composition_is_not_commutative_and_both_compositions_agree(variant):
         return [PlacedMap("wave", {"amount": 0.1, "frequency": 1.5}),
                 PlacedMap("peel", {"angle": 40, "hinge": 0.8, "height": 0.6, "radius": 0.8})]
 
-    pts = _p(RNG.uniform(0, 1, (4000, 3)))
+    pts = _p(rng.uniform(0, 1, (4000, 3)))
     ab = DisplacementChain(maps()).exact(pts)
     ba = DisplacementChain(maps()[::-1]).exact(pts)
     assert np.abs(_np(ab.p) - _np(ba.p)).max() > 0.05
@@ -218,11 +225,11 @@ def test_composition_is_not_commutative_and_both_compositions_agree(variant):
     assert err_fly < 0.01 and err_pre < 0.01
 
 
-def test_ten_maps_composed(variant):
+def test_ten_maps_composed(variant, rng):
     from mi_displace.volume.displacement import DisplacementChain, PlacedMap
 
     maps = [PlacedMap("wave", {"amount": 0.01, "frequency": 1 + i, "phase": 0.1 * i}) for i in range(10)]
-    pts = _p(RNG.uniform(0.1, 0.9, (2000, 3)))
+    pts = _p(rng.uniform(0.1, 0.9, (2000, 3)))
     exact = DisplacementChain(maps).exact(pts)
     approx = DisplacementChain(maps, bits=32).approximate(pts, True)
     assert np.isfinite(_np(approx.p)).all()
@@ -232,14 +239,14 @@ def test_ten_maps_composed(variant):
     assert np.array_equal(_np(exact.p)[:, :2], _np(pts)[:, :2])
 
 
-def test_proxy_grows_to_contain_displaced_matter(variant):
+def test_proxy_grows_to_contain_displaced_matter(variant, rng):
     from mi_displace.volume.displacement import DisplacementChain, PlacedMap
 
     chain = DisplacementChain([PlacedMap("slabs", {"count": 3, "gap": 0.3})])
     lo, hi = chain.proxy_box([0, 0, 0], [1, 1, 1])
     assert hi[2] >= 1.6 - 1e-6                       # two gaps of 0.3 above the unit box
     # every p' whose pre-image lies in the box is inside the proxy
-    pp = RNG.uniform(-0.5, 2.5, (20000, 3))
+    pp = rng.uniform(-0.5, 2.5, (20000, 3))
     r = chain.exact(_p(pp))
     pre = _np(r.p)
     inside = ((pre >= 0) & (pre <= 1)).all(1) & (np.array(r.alpha) == 1)

@@ -6,8 +6,6 @@ import pytest
 
 from volume_helpers import points as _p, to_numpy as _np
 
-RNG = np.random.default_rng(3)
-
 
 def _ball(n=48):
     from mi_displace.volume.objects import ObjectVolume
@@ -35,13 +33,13 @@ def _angle(a, b):
 M_BOX = np.array([[1.0, 0, 0, -0.5], [0, 1, 0, -0.5], [0, 0, 1, -0.5], [0, 0, 0, 1]])
 
 
-def test_jacobian_normals_follow_the_displaced_field(variant):
+def test_jacobian_normals_follow_the_displaced_field(variant, rng):
     """eq. 6 agrees with finite differences of the displaced field; the undisplaced gradient
     does not (Fig. 4b)."""
     from mi_displace.volume.displacement import PlacedMap
 
     v = _volume([PlacedMap("wave", {"amount": 0.12, "frequency": 1.0}, to_world=M_BOX, resolution=(64, 64, 2))])
-    pts = RNG.uniform(-0.3, 0.3, (3000, 3))
+    pts = rng.uniform(-0.3, 0.3, (3000, 3))
     p = _p(pts)
     field = np.array(v.smooth_field(p))
     keep = (field > 0.1) & (field < 0.9)              # inside the soft shell, where ∇ is well defined
@@ -54,7 +52,7 @@ def test_jacobian_normals_follow_the_displaced_field(variant):
         assert np.isfinite(_np(m)).all()
 
 
-def test_blend_uses_the_alpha_gradient_on_the_cut_face(variant):
+def test_blend_uses_the_alpha_gradient_on_the_cut_face(variant, rng):
     """eq. 7: at the cut face (α_s = 1/2) the normal is -∇α, here straight down into the gap."""
     from mi_displace.volume.displacement import PlacedMap
 
@@ -62,7 +60,7 @@ def test_blend_uses_the_alpha_gradient_on_the_cut_face(variant):
     m = np.array([[1.0, 0, 0, -0.5], [0, 1, 0, -0.5], [0, 0, 1, -0.5], [0, 0, 0, 1]])
     v = _volume([PlacedMap("slabs", {"count": 2, "gap": 0.1}, to_world=m, resolution=(2, 2, 256))],
                 smoothing=2.0)
-    xy = RNG.uniform(-0.1, 0.1, (400, 2))
+    xy = rng.uniform(-0.1, 0.1, (400, 2))
     zs = np.linspace(0.05, 0.15, 801)                 # upper half of the gap and above
     p = _p(np.column_stack([np.repeat(xy, len(zs), 0), np.tile(zs, len(xy))]))
     alpha = np.array(v.chain.approximate(p).alpha).reshape(len(xy), len(zs))
@@ -75,13 +73,13 @@ def test_blend_uses_the_alpha_gradient_on_the_cut_face(variant):
     assert np.median((jac * down).sum(1)) < 0.5        # eq. 6 alone keeps the ball's radial normal
 
 
-def test_singular_jacobians_give_finite_normals(variant):
+def test_singular_jacobians_give_finite_normals(variant, rng):
     """Inside the seam's gap D maps a slab onto a plane: det(I + J) = 0 there."""
     from mi_displace.volume.displacement import PlacedMap
 
     v = _volume([PlacedMap("seam", {"amount": 0.3}, to_world=M_BOX, resolution=(64, 64, 64))], smoothing=0.0)
-    p = _p(np.column_stack([RNG.uniform(-0.05, 0.05, 2000), RNG.uniform(-0.2, 0.2, 2000),
-                            RNG.uniform(0.3, 0.5, 2000)]))
+    p = _p(np.column_stack([rng.uniform(-0.05, 0.05, 2000), rng.uniform(-0.2, 0.2, 2000),
+                            rng.uniform(0.3, 0.5, 2000)]))
     r = v.chain.approximate(p, True)
     B = np.array([np.array(r.B[i][j]) for i in range(3) for j in range(3)]).T.reshape(-1, 3, 3)
     assert np.abs(np.linalg.det(B)).min() < 1e-3      # singular indeed
@@ -91,14 +89,14 @@ def test_singular_jacobians_give_finite_normals(variant):
         np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-4)
 
 
-def test_composite_normal_matrix_is_the_chain_rule(variant):
+def test_composite_normal_matrix_is_the_chain_rule(variant, rng):
     """eq. 10 on the fly: the product of the maps' B equals (J of the composite G)ᵀ by FD."""
     from mi_displace.volume.displacement import DisplacementChain, PlacedMap
 
     maps = [PlacedMap("wave", {"amount": 0.1, "frequency": 1.0}, resolution=(128, 32, 2)),
             PlacedMap("gaussian", {"amount": 0.4, "sigma": 0.2}, resolution=(64, 64, 64))]
     chain = DisplacementChain(maps, bits=32, smoothing=0.0)
-    pts = RNG.uniform(0.3, 0.7, (400, 3))
+    pts = rng.uniform(0.3, 0.7, (400, 3))
     r = chain.approximate(_p(pts), True)
     B = np.array([np.array(r.B[i][j]) for i in range(3) for j in range(3)]).T.reshape(-1, 3, 3)
     h = 1e-3
