@@ -270,7 +270,7 @@ class Relief(MesostructureBSDF):
         if self.shadow_steps == 0 or D == 0:
             return ct > 0
         return (ct > 0) & ~march_shadow(self.tiled, T, h, ct, step * tile, D,
-                                        self.shadow_steps)
+                                        self.shadow_steps, mi.Bool(active) & (ct > 0))
 
     def _sizes(self) -> dict:
         return {"steps": self.steps, "shadow_steps": self.shadow_steps}

@@ -21,33 +21,37 @@ MIN_COS = 0.02
 
 
 def first_crossing(below, lo: mi.Float, hi: mi.Float, steps: int, refine: int,
-                   label: str = "relief") -> tuple[mi.Float, mi.Bool]:
+                   label: str = "relief", active: mi.Bool | None = None) -> tuple[mi.Float, mi.Bool]:
     """First parameter in [lo, hi] where the predicate ``below(s)`` turns true.
 
     A linear search in ``steps`` equal steps finds the first sample below the surface,
     then ``refine`` bisections between it and the sample before it locate the crossing.
-    Where no sample is below, the result is ``hi`` and ``found`` is false.
+    Where no sample is below, the result is ``hi`` and ``found`` is false.  A lane stops
+    the linear search once it has found its sample (the loop ends when every lane of a SIMD
+    packet has): the same result as searching on.
 
     Args:
         below: callable Float -> Bool (the ray point at parameter s lies below the height
             field).
         lo, hi: the search interval per lane (same units as s).
+        active: optional lanes to search; the others' results are unspecified.
     """
     n = dr.width(lo) if dr.width(lo) > 1 else dr.width(hi)
     ds = (hi - lo) / steps
+    done = dr.zeros(mi.Bool, n) if active is None else ~mi.Bool(active) | dr.zeros(mi.Bool, n)
 
-    def lin_body(i, a, b, found):
+    def lin_body(i, a, b, found, done):
         s = lo + mi.Float(i + 1) * ds
         hit = ~found & below(s)
         b = dr.select(hit, s, b)
         a = dr.select(~found & ~hit, s, a)
-        return i + 1, a, b, found | hit
+        return i + 1, a, b, found | hit, done | hit
 
-    _, a, b, found = dr.while_loop(
+    _, a, b, found, _ = dr.while_loop(
         state=(mi.UInt32(0), lo + dr.zeros(mi.Float, n), hi + dr.zeros(mi.Float, n),
-               dr.zeros(mi.Bool, n)),
-        cond=lambda i, a, b, found: i < steps, body=lin_body,
-        labels=("i", "a", "b", "found"), label=f"{label}_linear")
+               dr.zeros(mi.Bool, n), done),
+        cond=lambda i, a, b, found, done: (i < steps) & ~done, body=lin_body,
+        labels=("i", "a", "b", "found", "done"), label=f"{label}_linear")
 
     def bis_body(i, a, b):
         mid = 0.5 * (a + b)
@@ -87,12 +91,16 @@ def march_view(height: TiledHeight, T: mi.Point2f, cos_t: mi.Float, dir_T: mi.Ve
 
 
 def march_shadow(height: TiledHeight, T: mi.Point2f, h: mi.Float, cos_l: mi.Float,
-                 dir_T: mi.Vector2f, D: float, steps: int) -> mi.Bool:
+                 dir_T: mi.Vector2f, D: float, steps: int, active: mi.Bool | None = None) -> mi.Bool:
     """True where the segment from P' (depth h) up to the reference surface towards L
-    passes below the height field (self-shadow)."""
+    passes below the height field (self-shadow).  A lane stops marching at its first
+    sample below the relief (the loop ends when every lane of a SIMD packet has), and
+    lanes outside ``active`` (optional) do not march: their answer is False."""
     cos_l = dr.maximum(cos_l, MIN_COS)
     tan_l = dr.sqrt(dr.maximum(1.0 - cos_l * cos_l, 0.0)) / cos_l
     eps = 0.5 * D / steps
+    n = dr.width(h)
+    run = dr.full(mi.Bool, True, n) if active is None else mi.Bool(active) | dr.zeros(mi.Bool, n)
 
     def body(i, shadow):
         depth = h * (1.0 - mi.Float(i + 1) / (steps + 1))
@@ -101,7 +109,7 @@ def march_shadow(height: TiledHeight, T: mi.Point2f, h: mi.Float, cos_l: mi.Floa
         shadow |= depth > D * (1.0 - height.value(Ts)) + eps
         return i + 1, shadow
 
-    _, shadow = dr.while_loop(state=(mi.UInt32(0), dr.zeros(mi.Bool, dr.width(h))),
-                              cond=lambda i, s: i < steps, body=body,
+    _, shadow = dr.while_loop(state=(mi.UInt32(0), dr.zeros(mi.Bool, n)),
+                              cond=lambda i, s: (i < steps) & ~s & run, body=body,
                               labels=("i", "shadow"), label="relief_shadow")
     return shadow

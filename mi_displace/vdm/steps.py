@@ -198,26 +198,37 @@ class VDMSteps:
         lo = dr.select(below(lo), 0.0, lo)
         hi = d * (1.0 + self.refine_window) + pad
         s, found = first_crossing(below, lo, hi, self.refine_steps, REFINE_BISECTIONS,
-                                  label="vdm_refine")
+                                  label="vdm_refine", active=active)
         return dr.select(active & found, s, d)
 
     def lit(self, fp: Footprint, w: mi.Vector3f, active: mi.Bool = True) -> mi.Bool:
         """Step 3: is P' lit from world direction w (ignoring curvature, §3.2)?  The shadow
-        check runs on the ``active`` lanes only (the others' answers are not read)."""
+        check runs on the ``active`` lanes that face the light only (the others' answers
+        are not read), under a symbolic if: a SIMD packet without such a lane skips the
+        table lookup; so does the check of a table shadow for a packet without one."""
         if not self.shadows or self.depth == 0.0:
             return mi.Bool(True)
         ct, theta, phi, step = fp.frame.direction(w)
-        theta_c = dr.minimum(theta, self.lookup.theta_max)
-        tan_l = dr.minimum(dr.tan(theta_c), self.tan_max)
-        sec_l = dr.sqrt(1.0 + tan_l * tan_l)
-        T3 = fp.T + fp.h * tan_l * fp.tile * step
-        d_l = self.lookup.d(T3, theta_c, phi, dr.zeros(mi.Float, dr.width(theta)))
-        s_p = fp.h * sec_l               # distance from P'' to P' along the light ray
-        blocked = d_l < s_p * (1.0 - self.rel) - self.eps * sec_l
-        if self.shadow_verify > 0:
-            blocked &= active
-            blocked &= self._occluded(T3, tan_l, sec_l, step * fp.tile, d_l, s_p, blocked)
-        return (ct > 0) & ~blocked
+
+        def blocked(theta, phi, step, T, h, tile, mask):
+            theta_c = dr.minimum(theta, self.lookup.theta_max)
+            tan_l = dr.minimum(dr.tan(theta_c), self.tan_max)
+            sec_l = dr.sqrt(1.0 + tan_l * tan_l)
+            T3 = T + h * tan_l * tile * step
+            d_l = self.lookup.d(T3, theta_c, phi, dr.zeros(mi.Float, dr.width(theta)))
+            s_p = h * sec_l               # distance from P'' to P' along the light ray
+            hit = mask & (d_l < s_p * (1.0 - self.rel) - self.eps * sec_l)
+            if self.shadow_verify > 0:
+                hit = dr.if_stmt((T3, tan_l, sec_l, step * tile, d_l, s_p, hit), hit,
+                                 lambda *args: (self._occluded(*args),), lambda *args: (args[-1],),
+                                 label="vdm_shadow_verify")[0]
+            return (hit,)
+
+        facing = mi.Bool(active) & (ct > 0)
+        shadow = dr.if_stmt((theta, phi, step, fp.T, fp.h, fp.tile, facing), facing, blocked,
+                            lambda *args: (dr.zeros(mi.Bool, dr.width(args[-1])),),
+                            label="vdm_shadow")[0]
+        return (ct > 0) & ~shadow
 
     def _occluded(self, T3, tan_l, sec_l, dir_T, d_l, s_p, active):
         """Check of a table shadow (our addition): some of ``shadow_verify`` points of the

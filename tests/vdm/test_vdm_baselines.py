@@ -57,6 +57,50 @@ def test_relief_march_on_a_constant_floor(variant):
     assert not np.any(np.asarray(shadow))
 
 
+def test_searches_stop_early_with_the_full_searches_results(variant, rng):
+    """The linear search of ``first_crossing`` and the shadow march stop a lane at its
+    first sample below the relief and skip lanes outside ``active``: on the lanes read,
+    bit for bit what the full, fixed-length loops (written out here) give."""
+    n, steps, refine = 4000, 16, 5
+    phase = mi.Float(rng.uniform(0, 2 * np.pi, n).astype(np.float32))
+    active = mi.Bool(rng.uniform(size=n) < 0.7)
+    below = lambda s: s >= 0.5 + 0.3 * dr.sin(7.0 * s + phase)
+    lo, hi = (mi.Float(rng.uniform(*r, n).astype(np.float32)) for r in ((0, 0.3), (0.35, 0.9)))
+    s, found = relief.first_crossing(below, lo, hi, steps, refine, active=active)
+    ds, a, b, full = (hi - lo) / steps, mi.Float(lo), mi.Float(hi), dr.zeros(mi.Bool, n)
+    for i in range(steps):                          # the full search, every lane, every step
+        x = lo + mi.Float(i + 1) * ds
+        hit = ~full & below(x)
+        b, a, full = dr.select(hit, x, b), dr.select(~full & ~hit, x, a), full | hit
+    for _ in range(refine):
+        mid = 0.5 * (a + b)
+        a, b = dr.select(below(mid), a, mid), dr.select(below(mid), mid, b)
+    on = np.asarray(active)
+    assert 0.2 < np.asarray(full)[on].mean() < 1.0            # both outcomes occur
+    np.testing.assert_array_equal(np.asarray(found)[on], np.asarray(full)[on])
+    np.testing.assert_array_equal(np.asarray(s)[on], np.asarray(0.5 * (a + b))[on])
+
+    res, D, k = 32, 0.3, 24
+    u = (np.arange(res) + 0.5) / res
+    heights = (0.5 + 0.5 * np.sin(2 * np.pi * u)[None, :] * np.cos(4 * np.pi * u)[:, None]).astype(np.float32)
+    height = TiledHeight(mi.load_dict({"type": "bitmap", "raw": True,
+                                       "bitmap": mi.Bitmap(heights[..., None])}), (1.0, 1.0), 1e-3)
+    T = mi.Point2f(*(mi.Float(rng.uniform(0, 1, n).astype(np.float32)) for _ in range(2)))
+    h = mi.Float(rng.uniform(0, D, n).astype(np.float32))
+    cos_l = mi.Float(rng.uniform(0.2, 1.0, n).astype(np.float32))
+    angle = mi.Float(rng.uniform(0, 2 * np.pi, n).astype(np.float32))
+    direction = mi.Vector2f(dr.cos(angle), dr.sin(angle))
+    shadow = relief.march_shadow(height, T, h, cos_l, direction, D, k, active)
+    tan_l = dr.sqrt(dr.maximum(1.0 - cos_l * cos_l, 0.0)) / cos_l
+    full = dr.zeros(mi.Bool, n)
+    for i in range(k):                              # the full march
+        depth = h * (1.0 - mi.Float(i + 1) / (k + 1))
+        Ts = mi.Point2f(T.x + (h - depth) * tan_l * direction.x, T.y + (h - depth) * tan_l * direction.y)
+        full |= depth > D * (1.0 - height.value(Ts)) + 0.5 * D / k
+    assert 0.1 < np.asarray(full)[on].mean() < 0.9
+    np.testing.assert_array_equal(np.asarray(shadow), np.asarray(full) & on)
+
+
 @pytest.mark.parametrize("plugin", ["horizon", "relief"])
 def test_baseline_plugins_depth_zero_and_bad_input(variant, plugin):
     mat = {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.6}}
