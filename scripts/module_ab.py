@@ -1,5 +1,6 @@
 """A/B of library modules in ONE process: the modules as they are in the work tree against
-the same modules as of a git commit, swapped in by name (their functions and constants),
+the same modules as of a git commit, swapped in by name (their functions and constants, the
+methods of their classes, and what they import from one another),
 on one scene's raster frame.  Prints whether the two images are identical (and finite),
 then ROUNDS x (median wall seconds of REPS frames drawn alternately, old and new) and their
 ratio: both versions see the same moments of a shared machine.
@@ -53,11 +54,39 @@ def main(base: str, modules: str, scene: str, *params: str) -> None:
         own = {k: v for k, v in vars(new).items()
                if (callable(v) and getattr(v, "__module__", None) == name) or isinstance(v, (int, float))}
         swaps.append((new, own, old_module(name, path, base)))
+    old_of = {new.__name__: old for new, _, old in swaps}
+    for _, _, old in swaps:   # the old modules call each other's old functions
+        for k, v in list(vars(old).items()):
+            source = old_of.get(getattr(v, "__module__", None))
+            if callable(v) and source is not None and source is not old and k in vars(source):
+                setattr(old, k, vars(source)[k])
+
+    def members(cls) -> dict:
+        return {k: v for k, v in vars(cls).items()
+                if isinstance(v, (types.FunctionType, staticmethod, classmethod, property))}
+
+    # methods of the modules' classes, swapped on the class itself: the scene's objects
+    # were made from the new class and keep it
+    methods = [(cls, members(cls), members(vars(old)[k]))
+               for new, own, old in swaps for k, cls in own.items()
+               if isinstance(cls, type) and isinstance(vars(old).get(k), type)]
+    imported = [(new, k, v, vars(old_of[v.__module__]).get(k, v)) for new, _, _ in swaps
+                for k, v in vars(new).items()
+                if callable(v) and getattr(v, "__module__", None) in old_of and v.__module__ != new.__name__]
 
     def use(which: str) -> None:
         for new, own, old in swaps:
             for k, v in own.items():
                 setattr(new, k, v if which == "new" else vars(old).get(k, v))
+        for cls, now, before in methods:
+            for k in now.keys() | before.keys():
+                value = (now if which == "new" else before).get(k)
+                if value is not None:
+                    setattr(cls, k, value)
+                elif k in vars(cls):   # a method only one version has
+                    delattr(cls, k)
+        for module, k, now, before in imported:
+            setattr(module, k, now if which == "new" else before)
 
     defaults = {"mode": "approximation", "integrator": "raster"}
     defaults.update(p.split("=", 1) for p in params)
