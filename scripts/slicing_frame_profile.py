@@ -14,7 +14,12 @@ DIRECTION a or best (default best), RES the film side (512), on ``slicing_donut.
   percentile, maximum) and the queries a SIMD packet of 16 neighbouring samples makes
   (the most of its lanes) over those of the lanes;
 * the frame's kernels by execution time (``dr.JitFlag.KernelHistory``) with the labels of
-  the symbolic loops and ifs they hold."""
+  the symbolic loops and ifs they hold;
+* the lever of the shape's ``rasterise=false`` (the slices walked by ray queries, as under
+  ``path``, instead of rasterised before the frame): the frame walked at RES, and on the
+  bench's fixed-cost film (``FIXED_RES``²) the frame drawn and walked, plain and with
+  ``raster``'s ``freeze`` (a walked frame is recorded whole; a drawn one rasterises outside
+  the recording), with the walked image's pixels that differ from the drawn one."""
 import re
 import statistics
 import sys
@@ -57,7 +62,15 @@ def main(direction: str = "best", res: str = "512") -> None:
         finally:
             bsdf.self_shadows = True
 
-    cases = {"frame": frame, "z-buffer passes": passes, "frame without self-shadows": unshadowed}
+    def walked():
+        shape.rasterise = False
+        try:
+            frame()
+        finally:
+            shape.rasterise = True
+
+    cases = {"frame": frame, "z-buffer passes": passes, "frame without self-shadows": unshadowed,
+             "frame walked": walked}
     for step in cases.values():
         step()
     used = {fam: volume.counts[fam] for fam in FAMILIES[direction]}
@@ -76,7 +89,8 @@ def main(direction: str = "best", res: str = "512") -> None:
         rest = med["frame without self-shadows"] - med["z-buffer passes"]
         print("  ".join(f"{name} {1e3 * t:.0f} ms" for name, t in med.items())
               + f"  | shares: self-shadow walk {walk / med['frame']:.2f}, passes "
-              f"{med['z-buffer passes'] / med['frame']:.2f}, rest {rest / med['frame']:.2f}")
+              f"{med['z-buffer passes'] / med['frame']:.2f}, rest {rest / med['frame']:.2f}"
+              f"; walked / drawn {med['frame walked'] / med['frame']:.2f}")
 
     # the self-shadow walk's queries: the walk's loops counted (trace's while_loop wrapped)
     drawn = rasterised.draw(volume, sensor, 1)
@@ -123,6 +137,51 @@ def main(direction: str = "best", res: str = "512") -> None:
         text = ir.getvalue() if hasattr(ir, "getvalue") else str(ir or "")
         labels = sorted(set(re.findall(r"(?:raster|slicing)_[a-z_]+", text)))
         print(f"  {h['execution_time']:8.1f} ms  size {h['size']:>8}  {', '.join(labels) or h['type'].name}")
+    fixed_cost(direction)
+
+
+def fixed_cost(direction: str) -> None:
+    """The frame drawn and walked (the shape's ``rasterise``), plain and frozen, on the
+    bench's fixed-cost film: median wall ms of frames drawn alternately."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from mi_displace.bench.frames import FIXED_RES
+    from mi_displace.core.resources import scene_path
+    from mi_displace.render.scene import load
+
+    scene, _ = load(scene_path("slicing_donut.xml"), mode="approximation", integrator="raster",
+                    direction=direction, res=FIXED_RES)
+    shape = next(s for s in scene.shapes() if hasattr(s, "raster_begin"))
+    integrators = {freeze: mi.load_dict({"type": "raster", "aa": 1, "freeze": freeze})
+                   for freeze in (False, True)}
+    cases = [(freeze, drawn) for freeze in (False, True) for drawn in (True, False)]
+    name = lambda case: f"{'frozen' if case[0] else 'plain'} {'drawn' if case[1] else 'walked'}"
+
+    def frame(case):
+        shape.rasterise = case[1]
+        try:
+            return mi.render(scene, integrator=integrators[case[0]], spp=1)
+        finally:
+            shape.rasterise = True
+
+    images = {case: np.array(frame(case)) for case in cases * 2}   # the second: replays
+    assert all(np.isfinite(image).all() for image in images.values())
+    differ = np.abs(images[(False, False)] - images[(False, True)]).max(-1)
+    print(f"fixed cost at {FIXED_RES}^2: walked vs drawn: {int((differ > 0).sum())} of "
+          f"{differ.size} pixels differ (max {differ.max():.2g}); frozen = plain: walked "
+          f"{np.array_equal(images[(True, False)], images[(False, False)])}, drawn "
+          f"{np.array_equal(images[(True, True)], images[(False, True)])}")
+    for _ in range(ROUNDS):
+        times = {case: [] for case in cases}
+        for _ in range(3 * REPS):
+            for case in cases:
+                dr.sync_thread()
+                start = time.perf_counter()
+                dr.eval(frame(case))
+                dr.sync_thread()
+                times[case].append(time.perf_counter() - start)
+        print("  ".join(f"{name(case)} {1e3 * statistics.median(t):.1f} ms" for case, t in times.items()))
 
 
 if __name__ == "__main__":
