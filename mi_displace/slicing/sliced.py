@@ -138,9 +138,11 @@ class SlicedVolume:
                 sm = geo.orthogonal_slices(bm, scale, axes[fam], geo.orthogonal_levels(bm, axes[fam], self.counts[fam]))
             tris += sm.triangles
             nbytes += sm.nbytes()
-            # the walk's polygon bound, opaque: the b / c counts follow the scale
-            self.families[fam] = (geo.SliceScene(geo.concat([sm, walls]), f"slices_{fam}"),
-                                  dr.opaque(mi.UInt32, 4 * self.counts[fam] + 64))
+            # the walk's polygon bound, opaque: the b / c counts follow the scale; a's
+            # slices step over the same base face in closed form (geo.LayerStack)
+            scene = geo.SliceScene(geo.concat([sm, walls]), f"slices_{fam}")
+            stack = geo.LayerStack(bm, slices, scene) if axes[fam] is None else None
+            self.families[fam] = (scene, dr.opaque(mi.UInt32, 4 * self.counts[fam] + 64), stack)
             family_stats[fam] = {"slices": self.counts[fam], "triangles": int(sm.triangles),
                                  "bytes": int(sm.nbytes()), "build_s": time.perf_counter() - start}
         self.walls_scene = geo.SliceScene(walls, "walls")   # also the proxy's face frames
@@ -235,11 +237,11 @@ class SlicedVolume:
         hit = Hit(found, mi.Point3f(origin), dr.zeros(mi.Point2f, n), dr.zeros(mi.Vector3f, n),
                   dr.zeros(mi.Vector3f, n), dr.zeros(mi.Vector3f, n))
         for index, fam in enumerate(FAMILIES[self.direction]):
-            slices, max_iter = self.families[fam]
+            slices, max_iter, stack = self.families[fam]
             mine = active & (choice == index)
             ok, t, prim, bary, *_ = first_passing_slice(slices, origin, d, self._test, mine,
                                                         max_iter, self.opaque_base, t_floor, coherent,
-                                                        (reach or {}).get(fam))
+                                                        (reach or {}).get(fam), stack)
             idx = slices.corners(prim, ok)
             uv = mi.Point2f(*slices.lerp(slices.uv, 2, idx, bary, ok))
             bn, su, sv = slices.frame(prim, bary, ok)
