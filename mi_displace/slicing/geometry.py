@@ -179,6 +179,9 @@ class SliceMesh:
     su: np.ndarray
     sv: np.ndarray
     faces: np.ndarray
+    #: per triangle, the walks' step table (:data:`STEP_COLUMNS`; :func:`orthogonal_slices`),
+    #: or None (a concatenation keeps none)
+    steps: np.ndarray | None = None
 
     @property
     def triangles(self) -> int:
@@ -249,37 +252,60 @@ def aligned_slices(bm: BaseMesh, scale: float, n: int) -> SliceMesh:
     return concat(parts)
 
 
+#: Columns of a family's step table (:func:`aligned_steps`, :func:`orthogonal_slices`):
+#: per slice triangle its lift (+1 / -1: its geometric normal points towards the next /
+#: previous slice over the same base triangle), the first triangle of that next and previous
+#: slice polygon (-1: none), and the other triangle of its own polygon (-1: a triangle).
+STEP_COLUMNS = 4
+
+
+def aligned_steps(bm: BaseMesh, n: int) -> np.ndarray:
+    """Direction a's step table (:data:`STEP_COLUMNS`): slice k's face k F + f
+    (:func:`aligned_slices`) steps to k F + f +- F, along the extrusion."""
+    F = len(bm.faces)
+    p = bm.positions[bm.faces]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    lift = np.sign(np.einsum("ij,ij->i", normal, bm.extrude[bm.faces].sum(1)))
+    face = np.arange(n * F)
+    up = np.where(face + F < n * F, face + F, -1)
+    return np.stack([np.tile(lift, n), up, np.where(face >= F, face - F, -1), np.full(n * F, -1)], 1)
+
+
 @dataclass(init=False, eq=False)   # its fields a PyTree: a frozen raster frame finds the arrays
 class LayerStack:
-    """Direction a's slices as a stack over the base (:func:`aligned_slices`: slice k's face
-    k F + f lies over base face f), for walks that step from a slice polygon to the one over
-    the same base face on the adjacent slice in closed form
-    (:func:`mi_displace.slicing.trace.first_passing_slice`).
+    """A slice family as stacks over the base triangles, for walks that step from a slice
+    polygon to the adjacent one over the same base triangle in closed form
+    (:func:`mi_displace.slicing.trace.first_passing_slice`): direction a's slices k and
+    k +- 1, b's / c's iso-line quads at adjacent levels.
 
     Attributes:
         positions, faces: the family's mesh (slices, then walls): its vertex positions
             (3 V,) Float [world units] and faces (3 F',) UInt32, the buffers Embree reads.
-        lift: per face, +1 or -1 where its geometric normal points towards increasing /
-            decreasing h (the extrusion), 0 on walls, (F',) Float.
-        stride: F, the faces of one slice; end: n F, the first wall face (opaque UInt32).
+        lift: per face, +1 or -1 where its geometric normal points towards the next /
+            previous polygon of its stack, 0 on walls, (F',) Float.
+        up, down, partner: per face, the first triangle of the next / previous polygon and
+            the other triangle of its own (:data:`~mi_displace.slicing.trace.NO_FACE`:
+            none), (F',) UInt32.
+        quads: whether the polygons are quads (b, c: two triangles each), not triangles (a).
     """
 
     positions: mi.Float
     faces: mi.UInt32
     lift: mi.Float
-    stride: mi.UInt32
-    end: mi.UInt32
+    up: mi.UInt32
+    down: mi.UInt32
+    partner: mi.UInt32
+    quads: bool
 
-    def __init__(self, bm: BaseMesh, n: int, slices: "SliceScene"):
-        p = bm.positions[bm.faces]
-        normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        up = np.sign(np.einsum("ij,ij->i", normal, bm.extrude[bm.faces].sum(1)))
-        lift = np.zeros(slices.triangles, np.float32)
-        lift[: n * len(bm.faces)] = np.tile(up, n)
+    def __init__(self, steps: np.ndarray, slices: "SliceScene"):
+        table = np.zeros((slices.triangles, STEP_COLUMNS))
+        table[:, 1:] = -1
+        table[: len(steps)] = steps   # the slices come first, the walls after
         self.positions = mi.traverse(slices.mesh)["vertex_positions"]
-        self.faces, self.lift = slices.faces, mi.Float(lift)
-        self.stride = dr.opaque(mi.UInt32, len(bm.faces))
-        self.end = dr.opaque(mi.UInt32, n * len(bm.faces))
+        self.faces, self.lift = slices.faces, mi.Float(table[:, 0].astype(np.float32))
+        self.up, self.down, self.partner = (mi.UInt32(np.where(c < 0, NO_FACE, c).astype(np.uint32))
+                                            for c in table[:, 1:].T)
+        self.quads = bool((steps[:, 3] >= 0).any())
 
     def intersect(self, face: mi.UInt32, ray: mi.Ray3f, active: mi.Bool):
         """``ray`` against triangle ``face``: ``(hit, t, b1, b2)``, the arithmetic of
@@ -300,12 +326,28 @@ class LayerStack:
         return hit, t, u, v
 
     def next_face(self, face: mi.UInt32, fn: mi.Vector3f, d: mi.Vector3f, active: mi.Bool) -> mi.UInt32:
-        """The face over the same base face on the slice that a ray along ``d`` meets next
-        after slice polygon ``face`` (unit normal ``fn``): one slice up or down the stack;
-        :data:`NO_FACE` past the stack's ends, on walls and where not ``active``."""
+        """The first triangle of the polygon over the same base triangle that a ray along
+        ``d`` meets next after slice triangle ``face`` (unit normal ``fn``): the next or the
+        previous one of its stack; :data:`NO_FACE` at the stack's ends, on walls and where
+        not ``active``."""
         lift = dr.gather(mi.Float, self.lift, face, active)
-        nxt = dr.select(dr.dot(d, fn) * lift > 0, face + self.stride, face - self.stride)
-        return dr.select(active & (lift != 0) & (nxt < self.end), nxt, NO_FACE)
+        ahead = active & (lift != 0)
+        nxt = dr.select(dr.dot(d, fn) * lift > 0, dr.gather(mi.UInt32, self.up, face, ahead),
+                        dr.gather(mi.UInt32, self.down, face, ahead))
+        return dr.select(ahead, nxt, NO_FACE)
+
+    def step(self, face: mi.UInt32, ray: mi.Ray3f, active: mi.Bool):
+        """``ray`` against the polygon whose first triangle is ``face`` (:meth:`next_face`):
+        ``(hit, t, b1, b2, triangle)``, the nearer of a quad's two triangles."""
+        active = active & (face != NO_FACE)
+        hit, t, u, v = self.intersect(face, ray, active)
+        if not self.quads:
+            return hit, t, u, v, face
+        other = dr.gather(mi.UInt32, self.partner, face, active)
+        hit2, t2, u2, v2 = self.intersect(other, ray, active & (other != NO_FACE))
+        second = hit2 & (~hit | (t2 < t))
+        return (hit | hit2, dr.select(second, t2, t), dr.select(second, u2, u), dr.select(second, v2, v),
+                dr.select(second, other, face))
 
 
 def orthogonal_levels(bm: BaseMesh, axis: int, count: int) -> np.ndarray:
@@ -342,8 +384,8 @@ def orthogonal_slices(bm: BaseMesh, scale: float, axis: int, levels: np.ndarray)
     lo, count = _crossings(bm, axis, levels)
     _check_size(2 * int(count.sum()), f"{len(levels)} orthogonal slices")
     face = np.repeat(np.arange(len(bm.faces)), count)
-    level = levels[np.repeat(lo, count) + np.arange(int(count.sum())) - np.repeat(
-        np.cumsum(count) - count, count)]
+    rank = np.repeat(lo, count) + np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    level = levels[rank]
     f = bm.faces[face]
     ends, weights, found = np.zeros((len(face), 2, 2), np.int64), np.zeros((len(face), 2)), \
         np.zeros(len(face), np.int64)
@@ -359,6 +401,7 @@ def orthogonal_slices(bm: BaseMesh, scale: float, axis: int, levels: np.ndarray)
         found[idx] += 1
     keep = found == 2
     ends, weights = ends[keep], weights[keep]
+    face, rank = face[keep], rank[keep]
 
     def lerp(attr):  # (S, 2, k): attribute at the two segment ends
         return attr[ends[:, :, 0]] * (1 - weights[..., None]) + attr[ends[:, :, 1]] * weights[..., None]
@@ -373,9 +416,24 @@ def orthogonal_slices(bm: BaseMesh, scale: float, axis: int, levels: np.ndarray)
     pick = [0, 1, 1, 0]
     base = 4 * np.arange(s)[:, None]
     faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
+    # the step table (STEP_COLUMNS): quad q's triangles q and s + q; its neighbours over the
+    # same base triangle are the quads of the adjacent levels, met along the gradient of
+    # the slicing coordinate on that triangle
+    q = np.arange(s)
+    b = bm.faces[face]
+    P, c = bm.positions[b], bm.uvs[b][:, :, axis]
+    e1, e2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    N = np.cross(e1, e2)
+    grad = (c[:, 1:2] - c[:, :1]) * np.cross(e2, N) + (c[:, 2:3] - c[:, :1]) * np.cross(N, e1)   # x |N|^2
+    normal = np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0])
+    lift = np.sign(np.einsum("ij,ij->i", normal, grad))
+    same = lambda k: (k >= 0) & (k < s) & (face[np.clip(k, 0, s - 1)] == face) & (
+        rank[np.clip(k, 0, s - 1)] == rank + np.sign(k - q))
+    up, down = np.where(same(q + 1), q + 1, -1), np.where(same(q - 1), q - 1, -1)
+    steps = np.concatenate([np.stack([lift, up, down, q + s], 1), np.stack([lift, up, down, q], 1)])
     return SliceMesh(pos.reshape(-1, 3), uv[:, pick].reshape(-1, 2), rw.reshape(-1, 3),
                      n[:, pick].reshape(-1, 3), su[:, pick].reshape(-1, 3),
-                     sv[:, pick].reshape(-1, 3), faces)
+                     sv[:, pick].reshape(-1, 3), faces, steps)
 
 
 def prism_shape(bm: BaseMesh, scale: float) -> dict:

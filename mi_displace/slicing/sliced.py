@@ -138,10 +138,11 @@ class SlicedVolume:
                 sm = geo.orthogonal_slices(bm, scale, axes[fam], geo.orthogonal_levels(bm, axes[fam], self.counts[fam]))
             tris += sm.triangles
             nbytes += sm.nbytes()
-            # the walk's polygon bound, opaque: the b / c counts follow the scale; a's
-            # slices step over the same base face in closed form (geo.LayerStack)
+            # the walk's polygon bound, opaque: the b / c counts follow the scale; the walks
+            # step over the same base triangle in closed form (geo.LayerStack)
             scene = geo.SliceScene(geo.concat([sm, walls]), f"slices_{fam}")
-            stack = geo.LayerStack(bm, slices, scene) if axes[fam] is None else None
+            steps = geo.aligned_steps(bm, slices) if axes[fam] is None else sm.steps
+            stack = geo.LayerStack(steps, scene)
             self.families[fam] = (scene, dr.opaque(mi.UInt32, 4 * self.counts[fam] + 64), stack)
             family_stats[fam] = {"slices": self.counts[fam], "triangles": int(sm.triangles),
                                  "bytes": int(sm.nbytes()), "build_s": time.perf_counter() - start}

@@ -110,7 +110,7 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
             ray.maxt = near
         stepped = dr.zeros(mi.Bool, n)
         if stack is not None:   # the polygon over the same base face on the adjacent slice
-            stepped, tc, u, v = stack.intersect(after, ray, going & (after != NO_FACE))
+            stepped, tc, u, v, after = stack.step(after, ray, going)
 
         def query(ray, active):   # the BVH: the nearest polygon
             pi = scene.ray_intersect_preliminary(ray, coherent=coherent, active=active)

@@ -1,18 +1,22 @@
-"""Direction a's walk steps from a slice polygon to the one over the same base face on the
-adjacent slice in closed form (:class:`mi_displace.slicing.geometry.LayerStack`), asking the
-BVH only where the ray leaves that prism: against its second implementation, the walk that
-asks the BVH for every polygon (the family's stack removed)."""
+"""The walks step from a slice polygon to the adjacent one over the same base triangle in
+closed form (:class:`mi_displace.slicing.geometry.LayerStack`: direction a's slices k +- 1,
+b's / c's quads at the adjacent iso-levels), asking the BVH only where the ray leaves that
+prism: against its second implementation, the walk that asks the BVH for every polygon (the
+family's stack removed)."""
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+import pytest
 
-from mi_displace.slicing.trace import NO_FACE, step_past
+from mi_displace.slicing import sliced
+from mi_displace.slicing.trace import step_past
 from test_walk_reach import fields, random_rays, volume
 
 
-def test_step_is_the_polygon_the_bvh_finds(variant):
-    vol = volume("a")
-    slices, _, stack = vol.families["a"]
+@pytest.mark.parametrize("family", ["a", "b", "c"])
+def test_step_is_the_polygon_the_bvh_finds(variant, family):
+    vol = volume(family)
+    slices, _, stack = vol.families[family]
     o, d = random_rays(20000, seed=11)
     pi = slices.scene.ray_intersect_preliminary(mi.Ray3f(o, d))
     face = pi.prim_index
@@ -21,12 +25,12 @@ def test_step_is_the_polygon_the_bvh_finds(variant):
     fn = slices.face_normal(face, slice_hit)
     ray = mi.Ray3f(p + step_past(p, fn, d, slices.length) * d, d)
     nxt = stack.next_face(face, fn, d, slice_hit)
-    stepped, t, u, v = stack.intersect(nxt, ray, slice_hit & (nxt != NO_FACE))
+    stepped, t, u, v, tri = stack.step(nxt, ray, slice_hit)
     bvh = slices.scene.ray_intersect_preliminary(ray, active=stepped)
     stepped, lanes = np.array(stepped), np.array(slice_hit)
     # most steps stay in the prism: the closed form answers them
     assert lanes.sum() > 3000 and stepped.sum() > 0.5 * lanes.sum(), (stepped.sum(), lanes.sum())
-    same = np.array(bvh.prim_index)[stepped] == np.array(nxt)[stepped]
+    same = np.array(bvh.prim_index)[stepped] == np.array(tri)[stepped]
     assert same.mean() > 0.999, same.mean()
     gap = np.abs(np.array(bvh.t) - np.array(t))[stepped][same]
     assert gap.max() < 1e-5 * float(slices.length[0])
@@ -34,19 +38,21 @@ def test_step_is_the_polygon_the_bvh_finds(variant):
         assert np.abs(np.array(a) - np.array(b))[stepped][same].max() < 1e-4
 
 
-def test_stacked_walk_finds_the_fragments_of_the_bvh_walk(variant):
-    vol = volume("a")
+@pytest.mark.parametrize("direction", ["a", "b", "best"])
+def test_stacked_walk_finds_the_fragments_of_the_bvh_walk(variant, direction):
+    vol = volume(direction)
     o, d = random_rays(20000, seed=12)
     n = dr.width(o)
-    choice, active = dr.zeros(mi.UInt32, n), mi.Bool(np.arange(n) % 5 != 0)
+    choice = mi.UInt32(np.random.default_rng(4).integers(0, len(sliced.FAMILIES[direction]), n))
+    active = mi.Bool(np.arange(n) % 5 != 0)
     for t_floor in (None, mi.Float(np.random.default_rng(5).uniform(0, 0.1, n).astype(np.float32))):
         stacked = fields(vol.find(o, d, choice, active, t_floor))
-        slices, max_iter, stack = vol.families["a"]
-        vol.families["a"] = (slices, max_iter, None)
+        families = dict(vol.families)
+        vol.families = {f: (slices, bound, None) for f, (slices, bound, _) in families.items()}
         try:
             queried = fields(vol.find(o, d, choice, active, t_floor))
         finally:
-            vol.families["a"] = (slices, max_iter, stack)
+            vol.families = families
         found = queried[0]
         assert 0.2 < found.mean() < 0.9
         assert np.array_equal(stacked[0], found)
