@@ -9,10 +9,11 @@ DIRECTION a or best (default best), RES the film side (512), on ``slicing_donut.
   z-buffer passes alone (``mi_displace.slicing.rasterised.draw``) and of the frame with the
   slicing BSDF's self-shadows off: frame - (no self-shadows) is the self-shadow walk, the
   rest of the no-self-shadow frame beyond the passes is visibility and shading;
-* per slice family, the self-shadow walk's BVH queries per walking sample (the sun's
+* per slice family, the polygons the self-shadow walk meets per walking sample (the sun's
   direction from every fragment the passes found and the light faces; mean, median, 95th
-  percentile, maximum) and the queries a SIMD packet of 16 neighbouring samples makes
-  (the most of its lanes) over those of the lanes;
+  percentile, maximum: its iterations, each a closed-form step or a BVH query) and the
+  iterations a SIMD packet of 16 neighbouring samples makes (the most of its lanes) over
+  those of the lanes;
 * the frame's kernels by execution time (``dr.JitFlag.KernelHistory``) with the labels of
   the symbolic loops and ifs they hold;
 * the lever of the shape's ``rasterise=false`` (the slices walked by ray queries, as under
@@ -92,7 +93,7 @@ def main(direction: str = "best", res: str = "512") -> None:
               f"{med['z-buffer passes'] / med['frame']:.2f}, rest {rest / med['frame']:.2f}"
               f"; walked / drawn {med['frame walked'] / med['frame']:.2f}")
 
-    # the self-shadow walk's queries: the walk's loops counted (trace's while_loop wrapped)
+    # the self-shadow walk's iterations (polygons met): the walk's loops counted (trace's while_loop wrapped)
     drawn = rasterised.draw(volume, sensor, 1)
     hit = drawn.hit
     sun = next(e for e in scene.emitters() if e.class_name() == "DirectionalEmitter")
@@ -115,10 +116,10 @@ def main(direction: str = "best", res: str = "512") -> None:
         dr.eval(volume.occluded(hit, normal, wl, walking))
     finally:
         trace.dr = dr
-    for fam, (queries, lanes) in zip(FAMILIES[direction], counts):
-        q, on = np.array(queries), np.array(lanes)
+    for fam, (met, lanes) in zip(FAMILIES[direction], counts):
+        q, on = np.array(met), np.array(lanes)
         packets = q[: len(q) // 16 * 16].reshape(-1, 16).max(1).sum() * 16
-        print(f"family {fam}: {on.sum()} walking samples, queries mean {q[on].mean():.1f} median "
+        print(f"family {fam}: {on.sum()} walking samples, polygons met mean {q[on].mean():.1f} median "
               f"{np.median(q[on]):.0f} p95 {np.percentile(q[on], 95):.0f} max {q.max()}; "
               f"packets of 16 / lanes {packets / q.sum():.2f}")
 
