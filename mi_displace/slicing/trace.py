@@ -91,8 +91,9 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
             :meth:`~mi_displace.slicing.geometry.LayerStack.intersect`); where it meets it, that is the next polygon
             and the BVH is not queried.  Within a prism of the stack the next polygon is
             that one, except for a ray that leaves the prism through a side and comes back
-            before it (a grazing ray over a curved base), which then skips what it met
-            outside.
+            to it, which then skips what it met outside: where the volumes over
+            neighbouring base triangles overlap (a thick displacement over sharp features;
+            tests/slicing/test_walk_stack.py bounds how often).
 
     Returns:
         ``(found, t, prim, bary, t_enter, t_exit, bottom)``: distance, face and barycentrics

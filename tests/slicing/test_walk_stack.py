@@ -38,25 +38,70 @@ def test_step_is_the_polygon_the_bvh_finds(variant, family):
         assert np.abs(np.array(a) - np.array(b))[stepped][same].max() < 1e-4
 
 
-@pytest.mark.parametrize("direction", ["a", "b", "best"])
-def test_stacked_walk_finds_the_fragments_of_the_bvh_walk(variant, direction):
-    vol = volume(direction)
-    o, d = random_rays(20000, seed=12)
+def spot_volume(direction, scale=0.01, slices=12):
+    """A user's base: Spot (a mesh with UV seams and hard edges), rotated, scaled
+    non-uniformly and moved, in millimetres (the donut's volume is metres across); at
+    ``scale`` 0.01 its prisms' corners spread up to 75 degrees apart."""
+    from mi_displace.core.resources import data_path
+
+    T = mi.ScalarTransform4f
+    scene = mi.load_dict({"type": "scene", "spot": {
+        "type": "slicing", "base": "mesh", "filename": str(data_path("spot/spot_triangulated.obj")),
+        "scale": scale, "slices": slices, "direction": direction, "height": {"type": "bricks"},
+        "to_world": T().translate([300, -120, 40]) @ T().rotate([1, 2, 0], 50) @ T().scale([900, 1100, 1000])}})
+    return next(s for s in scene.shapes() if hasattr(s, "volume")).volume
+
+
+def rays_around(vol, count, seed):
+    """Rays from points within -0.5 .. 1.5 x the displacement along the base's vertex
+    normals (its world positions), in every direction."""
+    rng = np.random.default_rng(seed)
+    pick = rng.integers(0, len(vol.bm.positions), count)
+    h = rng.uniform(-0.5, 1.5, count)[:, None] * vol.world_scale
+    o = vol.bm.positions[pick] + h * vol.bm.normals[pick]
+    d = rng.normal(size=(count, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    f32 = lambda x: x.T.astype(np.float32)
+    return mi.Point3f(*f32(o)), mi.Vector3f(*f32(d))
+
+
+def compare_walks(vol, o, d, choice, active, t_floor):
+    """(stacked, BVH-only) :func:`fields` of ``vol.find``."""
+    stacked = fields(vol.find(o, d, choice, active, t_floor))
+    families = dict(vol.families)
+    vol.families = {f: (slices, bound, None) for f, (slices, bound, _) in families.items()}
+    try:
+        return stacked, fields(vol.find(o, d, choice, active, t_floor))
+    finally:
+        vol.families = families
+
+
+@pytest.mark.parametrize("direction, base", [("a", "donut"), ("b", "donut"), ("best", "donut"),
+                                             ("a", "spot"), ("best", "spot"), ("a", "thick spot")])
+def test_stacked_walk_finds_the_fragments_of_the_bvh_walk(variant, direction, base):
+    """The same fragments as the BVH-only walk, to rounding, in all but a few rays: a ray
+    that leaves the slab between two slices through a side where the volumes over
+    neighbouring base triangles overlap (Spot's prisms' sides twist by up to 0.8 x the
+    displacement at its sharp features; twice as thick, 4 of 20,000 rays) can come back to
+    the stacked polygon and pass what the BVH walk stopped at."""
+    if base == "donut":
+        vol = volume(direction)
+        o, d = random_rays(20000, seed=12)
+    else:
+        # best: fewer slices (its b / c counts follow, and their build is what takes time)
+        vol = spot_volume(direction, 0.02 if base == "thick spot" else 0.01, 12 if direction == "a" else 4)
+        o, d = rays_around(vol, 20000, 13)
     n = dr.width(o)
     choice = mi.UInt32(np.random.default_rng(4).integers(0, len(sliced.FAMILIES[direction]), n))
     active = mi.Bool(np.arange(n) % 5 != 0)
-    for t_floor in (None, mi.Float(np.random.default_rng(5).uniform(0, 0.1, n).astype(np.float32))):
-        stacked = fields(vol.find(o, d, choice, active, t_floor))
-        families = dict(vol.families)
-        vol.families = {f: (slices, bound, None) for f, (slices, bound, _) in families.items()}
-        try:
-            queried = fields(vol.find(o, d, choice, active, t_floor))
-        finally:
-            vol.families = families
+    size = float(vol.walls_scene.length[0])
+    for t_floor in (None, mi.Float(np.random.default_rng(5).uniform(0, 0.05 * size, n).astype(np.float32))):
+        stacked, queried = compare_walks(vol, o, d, choice, active, t_floor)
         found = queried[0]
         assert 0.2 < found.mean() < 0.9
-        assert np.array_equal(stacked[0], found)
+        differ = stacked[0] != found
         for a, b in zip(stacked[1:], queried[1:]):   # p, uv, n, su, sv (where found)
             assert np.isfinite(a[:, found]).all()
             scale = np.abs(b[:, found]).max()   # tangents are longer than unit vectors
-            assert np.abs(a - b)[:, found].max() < 1e-5 * scale, np.abs(a - b)[:, found].max() / scale
+            differ[found] |= (np.abs(a - b)[:, found] > 1e-4 * scale).any(0)
+        assert np.count_nonzero(differ) <= 1e-3 * n, np.count_nonzero(differ)
