@@ -165,7 +165,7 @@ def transform_pair(matrix: np.ndarray) -> tuple[mi.Transform4f, mi.Transform4f]:
 
 
 #: Bytes per vertex and per triangle of a :class:`SliceMesh` (:meth:`SliceMesh.nbytes`).
-VERTEX_BYTES, TRIANGLE_BYTES = (3 + 2 + 4 * 3) * 4, 12
+VERTEX_BYTES, TRIANGLE_BYTES = (3 + 2 + 4 * 3) * 4, 12 + 4   # indices, the walks' step bits
 
 
 @dataclass
@@ -179,7 +179,7 @@ class SliceMesh:
     su: np.ndarray
     sv: np.ndarray
     faces: np.ndarray
-    #: per triangle, the walks' step table (:data:`STEP_COLUMNS`; :func:`orthogonal_slices`),
+    #: per triangle, the walks' step bits (:class:`LayerStack`; :func:`orthogonal_slices`),
     #: or None (a concatenation keeps none)
     steps: np.ndarray | None = None
 
@@ -188,7 +188,8 @@ class SliceMesh:
         return len(self.faces)
 
     def nbytes(self) -> int:
-        """Bytes of the float32 vertex buffers and uint32 indices."""
+        """Bytes of the float32 vertex buffers, the uint32 indices and the walks' step bits
+        (:class:`LayerStack`, 4 bytes a triangle)."""
         return len(self.positions) * VERTEX_BYTES + len(self.faces) * TRIANGLE_BYTES
 
 
@@ -252,23 +253,26 @@ def aligned_slices(bm: BaseMesh, scale: float, n: int) -> SliceMesh:
     return concat(parts)
 
 
-#: Columns of a family's step table (:func:`aligned_steps`, :func:`orthogonal_slices`):
-#: per slice triangle its lift (+1 / -1: its geometric normal points towards the next /
-#: previous slice over the same base triangle), the first triangle of that next and previous
-#: slice polygon (-1: none), and the other triangle of its own polygon (-1: a triangle).
-STEP_COLUMNS = 4
+#: Bits of a slice triangle's entry in a family's step table (:class:`LayerStack`): the
+#: polygon of its stack one level up / down exists, and "up" lies on the side its geometric
+#: normal points to.
+STEP_UP, STEP_DOWN, STEP_UP_ALONG_NORMAL = 1, 2, 4
+
+
+def step_bits(up: np.ndarray, down: np.ndarray, along: np.ndarray) -> np.ndarray:
+    """A step table (:data:`STEP_UP` ...) from per-triangle booleans, (T,) uint32."""
+    return (up * STEP_UP + down * STEP_DOWN + along * STEP_UP_ALONG_NORMAL).astype(np.uint32)
 
 
 def aligned_steps(bm: BaseMesh, n: int) -> np.ndarray:
-    """Direction a's step table (:data:`STEP_COLUMNS`): slice k's face k F + f
-    (:func:`aligned_slices`) steps to k F + f +- F, along the extrusion."""
+    """Direction a's step table: slice k's face k F + f (:func:`aligned_slices`) steps to
+    k F + f +- F, up along the extrusion."""
     F = len(bm.faces)
     p = bm.positions[bm.faces]
     normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    lift = np.sign(np.einsum("ij,ij->i", normal, bm.extrude[bm.faces].sum(1)))
-    face = np.arange(n * F)
-    up = np.where(face + F < n * F, face + F, -1)
-    return np.stack([np.tile(lift, n), up, np.where(face >= F, face - F, -1), np.full(n * F, -1)], 1)
+    along = np.einsum("ij,ij->i", normal, bm.extrude[bm.faces].sum(1)) > 0
+    k = np.repeat(np.arange(n), F)
+    return step_bits(k + 1 < n, k > 0, np.tile(along, n))
 
 
 @dataclass(init=False, eq=False)   # its fields a PyTree: a frozen raster frame finds the arrays
@@ -276,36 +280,31 @@ class LayerStack:
     """A slice family as stacks over the base triangles, for walks that step from a slice
     polygon to the adjacent one over the same base triangle in closed form
     (:func:`mi_displace.slicing.trace.first_passing_slice`): direction a's slices k and
-    k +- 1, b's / c's iso-line quads at adjacent levels.
+    k +- 1 (faces k F + f, :func:`aligned_slices`), b's / c's iso-line quads at adjacent
+    levels (quad q's triangles q and q + Q, the quads of one base triangle consecutive,
+    :func:`orthogonal_slices`).
 
     Attributes:
         positions, faces: the family's mesh (slices, then walls): its vertex positions
             (3 V,) Float [world units] and faces (3 F',) UInt32, the buffers Embree reads.
-        lift: per face, +1 or -1 where its geometric normal points towards the next /
-            previous polygon of its stack, 0 on walls, (F',) Float.
-        up, down, partner: per face, the first triangle of the next / previous polygon and
-            the other triangle of its own (:data:`~mi_displace.slicing.trace.NO_FACE`:
-            none), (F',) UInt32.
-        quads: whether the polygons are quads (b, c: two triangles each), not triangles (a).
+        steps: per face its step bits (:data:`STEP_UP` ...; 0 on walls), (F',) UInt32:
+            4 bytes a triangle, the polygons' indices follow from the layout.
+        stride: a's faces per slice F, or b's / c's quad count Q (opaque UInt32).
+        quads: whether the polygons are quads (b, c), not triangles (a).
     """
 
     positions: mi.Float
     faces: mi.UInt32
-    lift: mi.Float
-    up: mi.UInt32
-    down: mi.UInt32
-    partner: mi.UInt32
+    steps: mi.UInt32
+    stride: mi.UInt32
     quads: bool
 
-    def __init__(self, steps: np.ndarray, slices: "SliceScene"):
-        table = np.zeros((slices.triangles, STEP_COLUMNS))
-        table[:, 1:] = -1
+    def __init__(self, steps: np.ndarray, slices: "SliceScene", stride: int, quads: bool):
+        table = np.zeros(slices.triangles, np.uint32)
         table[: len(steps)] = steps   # the slices come first, the walls after
         self.positions = mi.traverse(slices.mesh)["vertex_positions"]
-        self.faces, self.lift = slices.faces, mi.Float(table[:, 0].astype(np.float32))
-        self.up, self.down, self.partner = (mi.UInt32(np.where(c < 0, NO_FACE, c).astype(np.uint32))
-                                            for c in table[:, 1:].T)
-        self.quads = bool((steps[:, 3] >= 0).any())
+        self.faces, self.steps = slices.faces, mi.UInt32(table)
+        self.stride, self.quads = dr.opaque(mi.UInt32, stride), quads
 
     def intersect(self, face: mi.UInt32, ray: mi.Ray3f, active: mi.Bool):
         """``ray`` against triangle ``face``: ``(hit, t, b1, b2)``, the arithmetic of
@@ -330,11 +329,15 @@ class LayerStack:
         ``d`` meets next after slice triangle ``face`` (unit normal ``fn``): the next or the
         previous one of its stack; :data:`NO_FACE` at the stack's ends, on walls and where
         not ``active``."""
-        lift = dr.gather(mi.Float, self.lift, face, active)
-        ahead = active & (lift != 0)
-        nxt = dr.select(dr.dot(d, fn) * lift > 0, dr.gather(mi.UInt32, self.up, face, ahead),
-                        dr.gather(mi.UInt32, self.down, face, ahead))
-        return dr.select(ahead, nxt, NO_FACE)
+        bits = dr.gather(mi.UInt32, self.steps, face, active)
+        up = (dr.dot(d, fn) > 0) == ((bits & STEP_UP_ALONG_NORMAL) != 0)
+        exists = (bits & dr.select(up, STEP_UP, STEP_DOWN)) != 0
+        if self.quads:   # the quad's index: its first triangle's
+            face = dr.select(face < self.stride, face, face - self.stride)
+            nxt = dr.select(up, face + 1, face - 1)
+        else:
+            nxt = dr.select(up, face + self.stride, face - self.stride)
+        return dr.select(active & exists, nxt, NO_FACE)
 
     def step(self, face: mi.UInt32, ray: mi.Ray3f, active: mi.Bool):
         """``ray`` against the polygon whose first triangle is ``face`` (:meth:`next_face`):
@@ -343,8 +346,8 @@ class LayerStack:
         hit, t, u, v = self.intersect(face, ray, active)
         if not self.quads:
             return hit, t, u, v, face
-        other = dr.gather(mi.UInt32, self.partner, face, active)
-        hit2, t2, u2, v2 = self.intersect(other, ray, active & (other != NO_FACE))
+        other = face + self.stride   # a quad's second triangle
+        hit2, t2, u2, v2 = self.intersect(other, ray, active)
         second = hit2 & (~hit | (t2 < t))
         return (hit | hit2, dr.select(second, t2, t), dr.select(second, u2, u), dr.select(second, v2, v),
                 dr.select(second, other, face))
@@ -416,8 +419,8 @@ def orthogonal_slices(bm: BaseMesh, scale: float, axis: int, levels: np.ndarray)
     pick = [0, 1, 1, 0]
     base = 4 * np.arange(s)[:, None]
     faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
-    # the step table (STEP_COLUMNS): quad q's triangles q and s + q; its neighbours over the
-    # same base triangle are the quads of the adjacent levels, met along the gradient of
+    # the step table (LayerStack): quad q's triangles q and s + q; its neighbours over the
+    # same base triangle are the quads of the adjacent levels, "up" along the gradient of
     # the slicing coordinate on that triangle
     q = np.arange(s)
     b = bm.faces[face]
@@ -426,11 +429,10 @@ def orthogonal_slices(bm: BaseMesh, scale: float, axis: int, levels: np.ndarray)
     N = np.cross(e1, e2)
     grad = (c[:, 1:2] - c[:, :1]) * np.cross(e2, N) + (c[:, 2:3] - c[:, :1]) * np.cross(N, e1)   # x |N|^2
     normal = np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0])
-    lift = np.sign(np.einsum("ij,ij->i", normal, grad))
+    along = np.einsum("ij,ij->i", normal, grad) > 0
     same = lambda k: (k >= 0) & (k < s) & (face[np.clip(k, 0, s - 1)] == face) & (
         rank[np.clip(k, 0, s - 1)] == rank + np.sign(k - q))
-    up, down = np.where(same(q + 1), q + 1, -1), np.where(same(q - 1), q - 1, -1)
-    steps = np.concatenate([np.stack([lift, up, down, q + s], 1), np.stack([lift, up, down, q], 1)])
+    steps = np.tile(step_bits(same(q + 1), same(q - 1), along), 2)
     return SliceMesh(pos.reshape(-1, 3), uv[:, pick].reshape(-1, 2), rw.reshape(-1, 3),
                      n[:, pick].reshape(-1, 3), su[:, pick].reshape(-1, 3),
                      sv[:, pick].reshape(-1, 3), faces, steps)

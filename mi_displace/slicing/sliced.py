@@ -141,8 +141,10 @@ class SlicedVolume:
             # the walk's polygon bound, opaque: the b / c counts follow the scale; the walks
             # step over the same base triangle in closed form (geo.LayerStack)
             scene = geo.SliceScene(geo.concat([sm, walls]), f"slices_{fam}")
-            steps = geo.aligned_steps(bm, slices) if axes[fam] is None else sm.steps
-            stack = geo.LayerStack(steps, scene)
+            if axes[fam] is None:
+                stack = geo.LayerStack(geo.aligned_steps(bm, slices), scene, len(bm.faces), False)
+            else:
+                stack = geo.LayerStack(sm.steps, scene, sm.triangles // 2, True)
             self.families[fam] = (scene, dr.opaque(mi.UInt32, 4 * self.counts[fam] + 64), stack)
             family_stats[fam] = {"slices": self.counts[fam], "triangles": int(sm.triangles),
                                  "bytes": int(sm.nbytes()), "build_s": time.perf_counter() - start}
