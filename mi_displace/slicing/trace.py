@@ -85,11 +85,12 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
             for two polygons met within float rounding of the bound itself, where Embree's
             own bound test could keep the farther one (none seen: tested on random rays,
             and the donut's frames at 10 views are identical).
-        stack: the slices' :class:`~mi_displace.slicing.geometry.LayerStack` (direction a)
-            or ``None``: after a slice polygon, the ray is first tested against the polygon
-            over the same base face on the adjacent slice (Mitsuba's ray-triangle arithmetic,
-            :meth:`~mi_displace.slicing.geometry.LayerStack.intersect`); where it meets it, that is the next polygon
-            and the BVH is not queried.  Within a prism of the stack the next polygon is
+        stack: the slices' :class:`~mi_displace.slicing.geometry.LayerStack` or ``None``:
+            after a slice polygon, the ray is first tested against the adjacent polygon
+            over the same base triangle (a's next slice, b's / c's next iso-level, with
+            Mitsuba's ray-triangle arithmetic:
+            :meth:`~mi_displace.slicing.geometry.LayerStack.intersect`); where it meets it,
+            that is the next polygon and the BVH is not queried.  Within a prism of the stack the next polygon is
             that one, except for a ray that leaves the prism through a side and comes back
             to it, which then skips what it met outside: where the volumes over
             neighbouring base triangles overlap (a thick displacement over sharp features;
@@ -110,7 +111,7 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
         if reach is not None:
             ray.maxt = near
         stepped = dr.zeros(mi.Bool, n)
-        if stack is not None:   # the polygon over the same base face on the adjacent slice
+        if stack is not None:   # the adjacent polygon over the same base triangle
             stepped, tc, u, v, after = stack.step(after, ray, going)
 
         def query(ray, active):   # the BVH: the nearest polygon
