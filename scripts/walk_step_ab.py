@@ -13,7 +13,8 @@ seconds of REPS frames drawn alternately, BVH-only and stepped) and their ratio.
 
 ``raster`` frames are drawn with aa=1 at one sample a pixel, as ``mi-displace bench frames``
 draws them; another integrator (e.g. integrator=path) renders with the scene's own at SPP
-samples a pixel (environment, default 16), seed 0.  Environment: REPS (7), ROUNDS (3)."""
+samples a pixel (environment, default 16), seed 0, or with the Mitsuba integrator named by
+INTEGRATOR (e.g. volpath, ptracer; max_depth 3).  Environment: REPS (7), ROUNDS (3)."""
 import os
 import sys
 
@@ -38,7 +39,10 @@ def main(scene_file: str, *params: str) -> None:
         sys.exit(f"{scene_file}: no slicing shape with slice polygons (direction screen has none)")
     stepped = [dict(v.families) for v in volumes]
     queried = [{f: (slices, bound, None) for f, (slices, bound, _) in v.families.items()} for v in volumes]
-    if defaults["integrator"] == "raster":
+    if "INTEGRATOR" in os.environ:
+        integrator = mi.load_dict({"type": os.environ["INTEGRATOR"], "max_depth": 3})
+        spp = int(os.environ.get("SPP", 16))
+    elif defaults["integrator"] == "raster":
         integrator, spp = mi.load_dict({"type": "raster", "aa": 1}), 1
     else:
         integrator, spp = scene.integrator(), int(os.environ.get("SPP", 16))

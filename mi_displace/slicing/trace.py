@@ -112,7 +112,13 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
             ray.maxt = near
         stepped = dr.zeros(mi.Bool, n)
         if stack is not None:   # the adjacent polygon over the same base triangle
-            stepped, tc, u, v, after = stack.step(after, ray, going)
+            # under a symbolic if too: a packet with no lane past a slice polygon (walks that
+            # begin, or enter through a wall) skips the test
+            can = going & (after != NO_FACE)
+            zero = dr.zeros(mi.Float, n)
+            stepped, tc, u, v, after = dr.if_stmt(
+                (ray, can, after), can, lambda r, m, f: stack.step(f, r, m),
+                lambda r, m, f: (dr.zeros(mi.Bool, n), zero, zero, zero, f), label="slicing_step")
 
         def query(ray, active):   # the BVH: the nearest polygon
             pi = scene.ray_intersect_preliminary(ray, coherent=coherent, active=active)
