@@ -148,12 +148,17 @@ def make_base_mesh(base_name: str, params: dict, filename: str | None, resolutio
     if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(nrm)) and np.all(np.isfinite(uvs))):
         raise ValueError(f"{owner}: the base has NaN/Inf positions, normals or UVs")
     # wind every face so that its normal agrees with the vertex normals (outward)
-    p = pos[faces]
-    fn = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    inward = np.einsum("ij,ij->i", fn, nrm[faces].sum(1)) < 0
+    inward = np.einsum("ij,ij->i", face_normals(pos, faces), nrm[faces].sum(1)) < 0
     faces[inward] = faces[inward][:, ::-1]
     su, sv = (a.astype(np.float64) for a in tessellate.vertex_frames(pos, nrm, uvs, faces)[:2])
     return BaseMesh(pos, nrm, uvs, faces, su, sv, base, m, extrude)
+
+
+def face_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Unnormalised geometric normals (p1 - p0) x (p2 - p0) of triangles ``faces`` (F, 3)
+    of ``positions`` (V, 3): (F, 3)."""
+    p = positions[faces]
+    return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
 
 
 def transform_pair(matrix: np.ndarray) -> tuple[mi.Transform4f, mi.Transform4f]:
@@ -268,9 +273,7 @@ def aligned_steps(bm: BaseMesh, n: int) -> np.ndarray:
     """Direction a's step table: slice k's face k F + f (:func:`aligned_slices`) steps to
     k F + f +- F, up along the extrusion."""
     F = len(bm.faces)
-    p = bm.positions[bm.faces]
-    normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    along = np.einsum("ij,ij->i", normal, bm.extrude[bm.faces].sum(1)) > 0
+    along = np.einsum("ij,ij->i", face_normals(bm.positions, bm.faces), bm.extrude[bm.faces].sum(1)) > 0
     k = np.repeat(np.arange(n), F)
     return step_bits(k + 1 < n, k > 0, np.tile(along, n))
 
@@ -553,8 +556,7 @@ class SliceScene:
         self.bn, self.su, self.sv = f32(sm.bn), f32(sm.su), f32(sm.sv)
         first = sm.rw[sm.faces[:, 0]]
         self.flags = mi.UInt32((first[:, 1] > 0.5).astype(np.uint32) + 2 * (first[:, 2] > 0.5).astype(np.uint32))
-        p = sm.positions[sm.faces]
-        fn = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        fn = face_normals(sm.positions, sm.faces)
         self.fn = f32(fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-30))
         self.triangles = len(sm.faces)
         # opaque: a kernel parameter, so a rebuild at a new scale reuses the compiled kernels
