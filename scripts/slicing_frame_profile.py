@@ -11,9 +11,10 @@ DIRECTION a or best (default best), RES the film side (512), on ``slicing_donut.
   rest of the no-self-shadow frame beyond the passes is visibility and shading;
 * per slice family, the polygons the self-shadow walk meets per walking sample (the sun's
   direction from every fragment the passes found and the light faces; mean, median, 95th
-  percentile, maximum: its iterations, each a closed-form step or a BVH query) and the
-  iterations a SIMD packet of 16 neighbouring samples makes (the most of its lanes) over
-  those of the lanes;
+  percentile, maximum: its iterations, each a BVH query without the step tables), the BVH
+  queries among them (the rest are closed-form steps, ``mi_displace.slicing.geometry.LayerStack``),
+  and the iterations a SIMD packet of 16 neighbouring samples makes (the most of its
+  lanes) over those of the lanes;
 * the frame's kernels by execution time (``dr.JitFlag.KernelHistory``) with the labels of
   the symbolic loops and ifs they hold;
 * the lever of the shape's ``rasterise=false`` (the slices walked by ray queries, as under
@@ -93,7 +94,9 @@ def main(direction: str = "best", res: str = "512") -> None:
               f"{med['z-buffer passes'] / med['frame']:.2f}, rest {rest / med['frame']:.2f}"
               f"; walked / drawn {med['frame walked'] / med['frame']:.2f}")
 
-    # the self-shadow walk's iterations (polygons met): the walk's loops counted (trace's while_loop wrapped)
+    # the self-shadow walk's iterations (polygons met) and BVH queries: the walk's loops
+    # counted (trace's while_loop wrapped; its BVH query runs under the if labelled
+    # "slicing_query", whose mask is the lanes that ask)
     drawn = rasterised.draw(volume, sensor, 1)
     hit = drawn.hit
     sun = next(e for e in scene.emitters() if e.class_name() == "DirectionalEmitter")
@@ -101,27 +104,39 @@ def main(direction: str = "best", res: str = "512") -> None:
     wl = wl + dr.zeros(mi.Vector3f, dr.width(hit.found))
     normal = volume.normal(hit)
     walking = drawn.covered & hit.found & (dr.dot(normal, wl) > 0)
-    counts, loop = [], dr.while_loop
+    counts, asked = [], []
+
+    def if_stmt(args, cond, true_fn, false_fn, **kwargs):
+        if kwargs.get("label") == "slicing_query":
+            asked.append(cond)
+        return dr.if_stmt(args, cond, true_fn, false_fn, **kwargs)
 
     def counted(state, cond, body, **kwargs):
         kwargs.pop("labels", None)
-        out = loop((*state, dr.zeros(mi.UInt32, dr.width(state[3]))), lambda *s: cond(*s[:-1]),
-                   lambda *s: (*body(*s[:-1]), s[-1] + 1), **kwargs)
-        counts.append((out[-1], state[3]))
-        return out[:-1]
+
+        def step(*s):
+            asked.clear()
+            out = body(*s[:-2])
+            queried = asked[-1] if asked else s[3]   # s[3]: the lanes still walking
+            return (*out, s[-2] + 1, s[-1] + dr.select(queried, 1, 0))
+
+        zero = dr.zeros(mi.UInt32, dr.width(state[3]))
+        out = dr.while_loop((*state, zero, zero), lambda *s: cond(*s[:-2]), step, **kwargs)
+        counts.append((out[-2], out[-1], state[3]))
+        return out[:-2]
 
     trace.dr = types.SimpleNamespace(**{**{k: getattr(dr, k) for k in dir(dr) if not k.startswith("__")},
-                                        "while_loop": counted})
+                                        "while_loop": counted, "if_stmt": if_stmt})
     try:
         dr.eval(volume.occluded(hit, normal, wl, walking))
     finally:
         trace.dr = dr
-    for fam, (met, lanes) in zip(FAMILIES[direction], counts):
-        q, on = np.array(met), np.array(lanes)
+    for fam, (met, queries, lanes) in zip(FAMILIES[direction], counts):
+        q, b, on = np.array(met), np.array(queries), np.array(lanes)
         packets = q[: len(q) // 16 * 16].reshape(-1, 16).max(1).sum() * 16
         print(f"family {fam}: {on.sum()} walking samples, polygons met mean {q[on].mean():.1f} median "
-              f"{np.median(q[on]):.0f} p95 {np.percentile(q[on], 95):.0f} max {q.max()}; "
-              f"packets of 16 / lanes {packets / q.sum():.2f}")
+              f"{np.median(q[on]):.0f} p95 {np.percentile(q[on], 95):.0f} max {q.max()}, of them BVH "
+              f"queries mean {b[on].mean():.1f}; packets of 16 / lanes {packets / q.sum():.2f}")
 
     dr.kernel_history()
     with dr.scoped_set_flag(dr.JitFlag.KernelHistory):
