@@ -271,11 +271,13 @@ def step_bits(up: np.ndarray, down: np.ndarray, along: np.ndarray) -> np.ndarray
 
 def aligned_steps(bm: BaseMesh, n: int) -> np.ndarray:
     """Direction a's step table: slice k's face k F + f (:func:`aligned_slices`) steps to
-    k F + f +- F, up along the extrusion."""
+    k F + f +- F, up along the extrusion; the stack's last polygon is the top wall's face
+    n F + f (:func:`volume_walls`, the walls following the slices in the family's mesh):
+    a ray leaves the volume, or enters it, through it in closed form as well."""
     F = len(bm.faces)
     along = np.einsum("ij,ij->i", face_normals(bm.positions, bm.faces), bm.extrude[bm.faces].sum(1)) > 0
-    k = np.repeat(np.arange(n), F)
-    return step_bits(k + 1 < n, k > 0, np.tile(along, n))
+    k = np.repeat(np.arange(n + 1), F)
+    return step_bits(k < n, k > 0, np.tile(along, n + 1))
 
 
 @dataclass(init=False, eq=False)   # its fields a PyTree: a frozen raster frame finds the arrays
@@ -289,8 +291,8 @@ class LayerStack:
 
     Attributes:
         mesh: the family's ``mi.Mesh`` (slices, then walls), the triangles Embree holds.
-        steps: per face its step bits (:data:`STEP_UP` ...; 0 on walls), (F',) UInt32:
-            4 bytes a triangle, the polygons' indices follow from the layout.
+        steps: per face its step bits (:data:`STEP_UP` ...; 0 on walls but a's top wall),
+            (F',) UInt32: 4 bytes a triangle, the polygons' indices follow from the layout.
         stride: a's faces per slice F, or b's / c's quad count Q (opaque UInt32).
         quads: whether the polygons are quads (b, c), not triangles (a).
     """
@@ -316,9 +318,9 @@ class LayerStack:
 
     def next_face(self, face: mi.UInt32, fn: mi.Vector3f, d: mi.Vector3f, active: mi.Bool) -> mi.UInt32:
         """The first triangle of the polygon over the same base triangle that a ray along
-        ``d`` meets next after slice triangle ``face`` (unit normal ``fn``): the next or the
-        previous one of its stack; :data:`NO_FACE` at the stack's ends, on walls and where
-        not ``active``."""
+        ``d`` meets next after triangle ``face`` (unit normal ``fn``): the next or the
+        previous one of its stack; :data:`NO_FACE` at the stack's ends, on walls outside
+        it and where not ``active``."""
         bits = dr.gather(mi.UInt32, self.steps, face, active)
         up = (dr.dot(d, fn) > 0) == ((bits & STEP_UP_ALONG_NORMAL) != 0)
         exists = (bits & dr.select(up, STEP_UP, STEP_DOWN)) != 0

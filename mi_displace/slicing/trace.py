@@ -86,8 +86,9 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
             own bound test could keep the farther one (none seen: tested on random rays,
             and the donut's frames at 10 views are identical).
         stack: the slices' :class:`~mi_displace.slicing.geometry.LayerStack` or ``None``:
-            after a slice polygon, the ray is first tested against the adjacent polygon
-            over the same base triangle (a's next slice, b's / c's next iso-level, with
+            after a slice polygon (or a's top wall), the ray is first tested against the
+            adjacent polygon over the same base triangle (a's next slice or its top wall,
+            b's / c's next iso-level, with
             Mitsuba's ray-triangle arithmetic:
             :meth:`~mi_displace.slicing.geometry.LayerStack.intersect`); where it meets it,
             that is the next polygon and the BVH is not queried.  Within a prism of the stack the next polygon is
@@ -173,7 +174,7 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
             i = i + 1
         if stack is not None:
             # a retried query (reach) asks again from the same place: the same step first
-            after = dr.select(retry, after, stack.next_face(face, fn, d, going & valid & ~wall))
+            after = dr.select(retry, after, stack.next_face(face, fn, d, going & valid))
         return i, t_acc, found, going, t_hit, prim, b0, b1, t_enter, t_exit, bottom, near, after
 
     state = (dr.zeros(mi.UInt32, n), mi.Float(zero), dr.zeros(mi.Bool, n), mi.Bool(active),
