@@ -88,14 +88,14 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
         stack: the slices' :class:`~mi_displace.slicing.geometry.LayerStack` or ``None``:
             after a slice polygon (or a's top wall), the ray is first tested against the
             adjacent polygon over the same base triangle (a's next slice or its top wall,
-            b's / c's next iso-level, with
-            Mitsuba's ray-triangle arithmetic:
-            :meth:`~mi_displace.slicing.geometry.LayerStack.intersect`); where it meets it,
-            that is the next polygon and the BVH is not queried.  Within a prism of the stack the next polygon is
-            that one, except for a ray that leaves the prism through a side and comes back
-            to it, which then skips what it met outside: where the volumes over
-            neighbouring base triangles overlap (a thick displacement over sharp features;
-            tests/slicing/test_walk_stack.py bounds how often).
+            b's / c's next iso-level) with Mitsuba's ray-triangle arithmetic
+            (:meth:`~mi_displace.slicing.geometry.LayerStack.intersect`); where it meets
+            it, that is the next polygon and the BVH is not queried.  Within a prism of the
+            stack the next polygon is that one, except for a ray that leaves the prism
+            through a side and comes back to it, which then skips what it met outside:
+            where the volumes over neighbouring base triangles overlap (a thick
+            displacement over sharp features; tests/slicing/test_walk_stack.py bounds how
+            often).
 
     Returns:
         ``(found, t, prim, bary, t_enter, t_exit, bottom)``: distance, face and barycentrics
@@ -116,7 +116,6 @@ def first_passing_slice(slices, origin: mi.Point3f, d: mi.Vector3f,
             # under a symbolic if too: a packet with no lane past a slice polygon (walks that
             # begin, or enter through a wall) skips the test
             can = going & (after != NO_FACE)
-            zero = dr.zeros(mi.Float, n)
             stepped, tc, u, v, after = dr.if_stmt(
                 (ray, can, after), can, lambda r, m, f: stack.step(f, r, m),
                 lambda r, m, f: (dr.zeros(mi.Bool, n), zero, zero, zero, f), label="slicing_step")
