@@ -53,8 +53,8 @@ class FrameBuffer:
         view: the sensor's :class:`~mi_displace.render.zbuffer.View`; aa: sub-samples per
             pixel side (the sample order of :func:`mi_displace.render.raster.pixel_rays`).
         covered: per sample, whether the frame answers for it: its ray meets the volume's
-            walls (Bool; every sample when one family is drawn without the base polygons:
-            the walls then decide nothing, as every slice lies inside them).
+            walls (Bool; every sample when one family is drawn: the walls then decide
+            nothing, as every slice and base polygon lies inside them).
         found: per sample, whether a fragment passed (Bool).
         packed: per sample, the fragment: :data:`PACKED` floats (1, p, uv, n, su, sv, 0;
             undefined where ``found`` is not set), read by one packet gather, (n * 16,)
@@ -277,14 +277,15 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
     low = mi.UInt64(0xFFFFFFFF)
     walls = volume.walls_scene
     wgeom = walls.geometry()
-    if len(FAMILIES[volume.direction]) > 1 or volume.opaque_base:
+    if len(FAMILIES[volume.direction]) > 1:
         # the first wall each sample's ray meets: the proxy face the walk starts from
         wkeys, _ = zbuffer.rasterise(view, wgeom, True, aa=aa)
         covered = wkeys != zbuffer.EMPTY
         third = dr.full(mi.Float, 1 / 3, n)
         bn, su, sv = walls.frame(mi.UInt32(wkeys & low), (third, third), covered)
         choice = volume.choose(ray.d, dr.normalize(bn), su, sv)
-    else:   # one family, no base: the walls decide nothing (every slice lies inside them)
+    else:   # one family: the walls decide nothing (every slice and base polygon lies inside
+        # them, and a ray that misses them never asks the frame: it misses the proxy)
         covered, choice = dr.full(mi.Bool, True, n), dr.zeros(mi.UInt32, n)
     dr.eval(covered, choice)
     eye = None
