@@ -311,10 +311,11 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
         # samples whose ray misses the volume start at the nearest key: nothing drawn there
         base, bclip = zbuffer.rasterise(view, bgeom, True, aa=aa, alpha=leaving,
                                         initial=dr.select(covered, initial, 0))
-        _store(frame, ray, covered & (base != zbuffer.EMPTY), base, bclip, bgeom,
-               _slice_attributes(walls, bottoms))
+        # stored last, where no slice fragment lies in front of it: a few samples (the
+        # slices' own base, slice 0 or the lowest iso-levels, is in front almost everywhere)
+        bottom = covered & (base != zbuffer.EMPTY)
         initial = base | low
-        dr.eval(initial)
+        dr.eval(initial, bottom)
     for index, fam in enumerate(FAMILIES[volume.direction]):   # a, b, c: three at most
         mine = covered & (choice == index)
         if not dr.any(mine):
@@ -330,5 +331,10 @@ def draw(volume: SlicedVolume, sensor: mi.Sensor, aa: int = 1) -> FrameBuffer:
             keys, clip, geom, attributes = _draw_aligned(volume, view, aa, slices, start)
         else:
             keys, clip, geom, attributes = _draw_polygons(volume, view, aa, slices, mine, start)
-        _store(frame, ray, mine & ((keys & low) != low), keys, clip, geom, attributes)
+        drawn = mine & ((keys & low) != low)
+        _store(frame, ray, drawn, keys, clip, geom, attributes)
+        if volume.opaque_base:
+            bottom &= ~drawn
+    if volume.opaque_base:
+        _store(frame, ray, bottom, base, bclip, bgeom, _slice_attributes(walls, bottoms))
     return frame
