@@ -242,10 +242,12 @@ def _draw_aligned(volume: SlicedVolume, view, aa, slices, start):
         uvs = _corner_uvs(slices, slices.corners(f, active), active)
         return lambda sample, k, b1, b2, active: _passes(volume, uvs, b1, b2, mi.Float(k) / n, active)
 
-    if volume.alpha == "basic":
+    if volume.alpha == "basic" and not volume.opaque_base:
         # slice 0 passes the basic test everywhere (D >= 0), so its fragments are in the
         # result wherever nothing nearer passes: drawn first without α-test (a depth
-        # pre-pass, same keys), they cull the prisms and fragments behind the surface
+        # pre-pass, same keys), they cull the prisms and fragments behind the surface.  The
+        # base polygons, when drawn (before, in `draw`), cull the same: their bottom wall
+        # lies just below slice 0 (the donut's raster frame at 512^2: 0.95-0.98x, the same)
         start, _ = zbuffer.rasterise(view, base, True, aa=aa, initial=start)
     keys, _ = zbuffer.rasterise_layers(view, base, step, n, aa=aa, alpha=alpha, initial=start)
     table = volume.vertex_table   # every slice's vertex v' has base vertex v' mod V's attributes
