@@ -79,8 +79,9 @@ def test_slices_rasterised_by_rows_are_those_of_every_candidate(variant, helpers
 def test_slivers_drawn_whole_are_those_drawn_by_rows(variant, helpers, monkeypatch, direction):
     """Slivers (boxes at most SPAN wide, TALL tall: the orthogonal slices, the walls) drawn
     by one thread each looping over their rows: bit-identical keys of every pass of the
-    donut's frame (walls, base polygons, slices; alpha-tested) to the same triangles drawn
-    by one thread per row piece (TALL 0)."""
+    donut's frame (``best``: walls, base polygons, slices b and c, alpha-tested; ``a``: the
+    base polygons, its slices being prisms) to the same triangles drawn by one thread per
+    row piece (TALL 0)."""
     sensor = mi.load_dict(helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=96))
     _, scene = helpers.render({**donut(direction), "bsdf": helpers.MATERIAL},
                               helpers.look([0, -3.4, 2.2], [0, 0, -0.1], fov=38, res=8))
@@ -106,7 +107,7 @@ def test_slivers_drawn_whole_are_those_drawn_by_rows(variant, helpers, monkeypat
     slivers.clear()
     rows = rasterised.draw(vol, sensor)
     assert not any(slivers)
-    assert len(passes) == len(drawn_whole) >= 2
+    assert len(passes) == len(drawn_whole) >= (1 if direction == "a" else 4)
     for a, b in zip(drawn_whole, passes):
         assert np.array_equal(a, b)
     found = np.array(whole.hit.found)
