@@ -21,7 +21,9 @@ DIRECTION a or best (default best), RES the film side (512), on ``slicing_donut.
   ``path``, instead of rasterised before the frame): the frame walked at RES, and on the
   bench's fixed-cost film (``FIXED_RES``²) the frame drawn and walked, plain and with
   ``raster``'s ``freeze`` (a walked frame is recorded whole; a drawn one rasterises outside
-  the recording), with the walked image's pixels that differ from the drawn one."""
+  the recording), with the walked image's pixels that differ from the drawn one, and of a
+  frozen frame the time of Dr.Jit's call itself (the recording's inputs traversed, its
+  kernels replayed, the inputs assigned back)."""
 import re
 import statistics
 import sys
@@ -181,6 +183,18 @@ def fixed_cost(direction: str) -> None:
         finally:
             shape.rasterise = True
 
+    frozen = integrators[True].frozen   # mi_displace.render.raster.FrozenFrames
+    replay, calls = frozen.function, []
+
+    def timed(*args):   # Dr.Jit's own call: the inputs traversed, the kernels replayed, the
+        dr.sync_thread()   # inputs assigned back
+        start = time.perf_counter()
+        result = replay(*args)
+        dr.sync_thread()
+        calls.append(time.perf_counter() - start)
+        return result
+
+    frozen.function = timed
     images = {case: np.array(frame(case)) for case in cases * 2}   # the second: replays
     assert all(np.isfinite(image).all() for image in images.values())
     differ = np.abs(images[(False, False)] - images[(False, True)]).max(-1)
@@ -190,14 +204,20 @@ def fixed_cost(direction: str) -> None:
           f"{np.array_equal(images[(True, True)], images[(False, True)])}")
     for _ in range(ROUNDS):
         times = {case: [] for case in cases}
+        replays = {case: [] for case in cases if case[0]}
         for _ in range(3 * REPS):
             for case in cases:
+                calls.clear()
                 dr.sync_thread()
                 start = time.perf_counter()
                 dr.eval(frame(case))
                 dr.sync_thread()
                 times[case].append(time.perf_counter() - start)
-        print("  ".join(f"{name(case)} {1e3 * statistics.median(t):.1f} ms" for case, t in times.items()))
+                if case[0]:
+                    replays[case] += calls
+        print("  ".join(f"{name(case)} {1e3 * statistics.median(t):.1f} ms" for case, t in times.items())
+              + "  | of a frozen frame, Dr.Jit's call: " + "  ".join(
+                  f"{name(case).split()[1]} {1e3 * statistics.median(t):.1f} ms" for case, t in replays.items()))
 
 
 if __name__ == "__main__":

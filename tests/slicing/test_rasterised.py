@@ -175,6 +175,19 @@ def test_rasterised_plane_orthographic_and_aa(variant, helpers):
     assert_same(a, np.array(mi.render(scene, integrator=raster)))
 
 
+@pytest.mark.parametrize("direction", ["a", "b"])
+def test_one_family_with_its_base_is_the_walked_one(variant, helpers, direction):
+    """One family draws no walls pass, its base polygons or not (every sample is the
+    frame's: a ray that misses the walls misses the proxy), and a's slice 0 no depth
+    pre-pass when the base polygons were drawn: the open plane seen at a grazing angle,
+    its near edge (where the bottom wall reaches past slice 0) in view, as walked."""
+    sensor = helpers.look([0.2, -2.4, 0.45], [0, -0.2, 0], fov=45, res=48)
+    img, walked, obj = both(helpers, helpers.plane(slices=12, direction=direction), sensor)
+    assert_same(img, walked)
+    frame = rasterised.draw(obj.volume, mi.load_dict(sensor))
+    assert np.array(frame.covered).all() and 0.2 < np.array(frame.hit.found).mean() < 1
+
+
 def test_zero_heights_draw_nothing(variant, helpers):
     """ramp α-test: a zero map discards every fragment (the base not drawn: nothing)."""
     zero = {"type": "uniform", "value": 0.0}
