@@ -87,3 +87,17 @@ def test_llvm_crashes_on_a_per_lane_divisor_of_a_loaded_array(mode, crashes):
     lines = outcome("llvm_division_crash.py", [mode], f"drjit {dr.__version__}, libLLVM 19.1",
                     crashes, "")
     assert crashes or lines[-1] == "ok 30720"
+
+
+@pytest.mark.parametrize("mode", ["leaves", "registry"])
+def test_freeze_call_overhead_reproduction_runs(mode):
+    """scripts/repro/freeze_call_overhead.py (docs/platform.md, the fixed cost of a frozen
+    call) runs and prints its per-call times, all finite and positive.  Its figures are
+    timings, which no test asserts; this keeps the script from rotting."""
+    import re
+
+    lines = outcome("freeze_call_overhead.py", [mode, "8"], f"drjit {__import__('drjit').__version__}",
+                    False, "")
+    times = [float(t) for line in lines[1:] for t in re.findall(r"(-?[0-9.]+) us a call", line)]
+    assert len(times) == (5 if mode == "leaves" else 2)
+    assert all(0 < t < 1e6 for t in times)
